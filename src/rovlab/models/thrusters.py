@@ -1,0 +1,231 @@
+"""Thruster models: PWM command <-> thrust (SPEC section 3).
+
+Two models, chosen per thruster in the vehicle file:
+
+* ``quadratic``: the dead-band fit of the MC-Lab rig. With the PWM offset u = pwm - neutral
+  and dead band d, s = u - d (u > d) or s = u + d (u < -d), and f = K_L s + K_NL s|s|
+  (K_L, K_NL taken from the forward or the reverse set). The inverse is the exact root of
+  the quadratic, written in the cancellation-free form s = 2 f / (K_L + sqrt(K_L^2 + 4 K_NL |f|)).
+* ``table``: Blue Robotics' T200 bollard-thrust tables (10-20 V, September 2019), linear in
+  supply voltage and in PWM. The tables are made monotone from neutral outwards (the maker's
+  data dips by a few grams at full reverse) so that the forward map and its inverse agree.
+
+Commands are saturated to each thruster's [pwm_min_us, pwm_max_us]; thrust limits follow.
+The ``ThrusterBank`` packs all thrusters of a vehicle into arrays for compiled per-step code.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from importlib import resources
+
+import numpy as np
+from numba import njit
+
+from rovlab.params.vehicle import Thruster, Vehicle
+
+KGF = 9.80665  # N per kilogram-force
+TABLE_VOLTAGES = (10, 12, 14, 16, 18, 20)
+TABLE_PWM = np.arange(1100.0, 1900.0 + 1e-9, 4.0)  # the maker's grid [us]
+
+# Columns of a packed thruster row.
+K_KIND, K_NEUTRAL, K_DEAD, K_KLP, K_KNLP, K_KLN, K_KNLN, K_PMIN, K_PMAX = range(9)
+KIND_QUADRATIC, KIND_TABLE = 0.0, 1.0
+
+
+@functools.lru_cache(maxsize=None)
+def t200_raw_table(voltage: int) -> tuple[np.ndarray, np.ndarray]:
+    """(pwm_us, force_N) of the maker's table at one of the tabulated voltages."""
+    if voltage not in TABLE_VOLTAGES:
+        raise ValueError(f"no T200 table at {voltage} V; tabulated: {TABLE_VOLTAGES}")
+    text = (resources.files("rovlab.models") / "data" / "t200" / f"T200-Thrusters-{voltage}V.csv").read_text(
+        encoding="utf-8")
+    pwm, force = [], []
+    for line in text.splitlines()[1:]:
+        cells = [c.strip() for c in line.split(",")]
+        if len(cells) < 6 or not cells[0]:
+            continue
+        pwm.append(float(cells[0]))
+        force.append(float(cells[5]) * KGF)
+    return np.array(pwm), np.array(force)
+
+
+def t200_force_table(voltage: float) -> np.ndarray:
+    """Thrust [N] on TABLE_PWM at a supply voltage in [10, 20] V, linear between tables,
+    made monotone outwards from neutral."""
+    if not 10.0 <= voltage <= 20.0:
+        raise ValueError(f"T200 supply voltage must be within 10-20 V, got {voltage}")
+    volts = np.array(TABLE_VOLTAGES, dtype=float)
+    j = int(np.clip(np.searchsorted(volts, voltage) - 1, 0, len(volts) - 2))
+    lo_v, hi_v = volts[j], volts[j + 1]
+    a = (voltage - lo_v) / (hi_v - lo_v)
+    p_lo, f_lo = t200_raw_table(int(lo_v))
+    p_hi, f_hi = t200_raw_table(int(hi_v))
+    force = (1 - a) * np.interp(TABLE_PWM, p_lo, f_lo) + a * np.interp(TABLE_PWM, p_hi, f_hi)
+    mid = int(np.searchsorted(TABLE_PWM, 1500.0))
+    force[mid:] = np.maximum.accumulate(np.maximum(force[mid:], 0.0))
+    force[: mid + 1] = np.minimum.accumulate(np.minimum(force[: mid + 1], 0.0)[::-1])[::-1]
+    return force
+
+
+# --------------------------------------------------------------------------------------------
+# Compiled kernels on a packed row
+# --------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _quad_force(row: np.ndarray, pwm: float) -> float:
+    pwm = min(max(pwm, row[K_PMIN]), row[K_PMAX])
+    u = pwm - row[K_NEUTRAL]
+    d = row[K_DEAD]
+    if u > d:
+        s = u - d
+        return row[K_KLP] * s + row[K_KNLP] * s * s
+    if u < -d:
+        s = u + d
+        return row[K_KLN] * s - row[K_KNLN] * s * s
+    return 0.0
+
+
+ZERO_FORCE = 1e-10  # |f| below this [N] is commanded as neutral (it lies in the dead band anyway)
+
+
+@njit(cache=True)
+def _quad_pwm(row: np.ndarray, f: float) -> float:
+    if abs(f) <= ZERO_FORCE:
+        return row[K_NEUTRAL]
+    if f > 0.0:
+        s = 2.0 * f / (row[K_KLP] + np.sqrt(row[K_KLP] ** 2 + 4.0 * row[K_KNLP] * f))
+        pwm = row[K_NEUTRAL] + row[K_DEAD] + s
+    else:
+        s = -2.0 * (-f) / (row[K_KLN] + np.sqrt(row[K_KLN] ** 2 + 4.0 * row[K_KNLN] * (-f)))
+        pwm = row[K_NEUTRAL] - row[K_DEAD] + s
+    return min(max(pwm, row[K_PMIN]), row[K_PMAX])
+
+
+@njit(cache=True)
+def _table_force(row: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: float) -> float:
+    pwm = min(max(pwm, row[K_PMIN]), row[K_PMAX])
+    return np.interp(pwm, grid_pwm, grid_f)
+
+
+@njit(cache=True)
+def _table_pwm(row: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, f: float) -> float:
+    if abs(f) <= ZERO_FORCE:
+        return row[K_NEUTRAL]
+    n = grid_pwm.shape[0]
+    if f > 0.0:
+        # first grid point (from neutral upwards) whose force reaches f, then linear back
+        for k in range(n - 1):
+            if grid_pwm[k + 1] > row[K_NEUTRAL] and grid_f[k + 1] >= f and grid_f[k + 1] > grid_f[k]:
+                t = (f - grid_f[k]) / (grid_f[k + 1] - grid_f[k])
+                pwm = grid_pwm[k] + max(t, 0.0) * (grid_pwm[k + 1] - grid_pwm[k])
+                return min(max(pwm, row[K_PMIN]), row[K_PMAX])
+        return row[K_PMAX]
+    for k in range(n - 1, 0, -1):
+        if grid_pwm[k - 1] < row[K_NEUTRAL] and grid_f[k - 1] <= f and grid_f[k - 1] < grid_f[k]:
+            t = (f - grid_f[k]) / (grid_f[k - 1] - grid_f[k])
+            pwm = grid_pwm[k] + max(t, 0.0) * (grid_pwm[k - 1] - grid_pwm[k])
+            return min(max(pwm, row[K_PMIN]), row[K_PMAX])
+    return row[K_PMIN]
+
+
+@njit(cache=True)
+def bank_force(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: np.ndarray) -> np.ndarray:
+    """Thrust of every thruster for a vector of PWM commands (saturated to their ranges)."""
+    out = np.empty(rows.shape[0])
+    for i in range(rows.shape[0]):
+        if rows[i, K_KIND] == KIND_QUADRATIC:
+            out[i] = _quad_force(rows[i], pwm[i])
+        else:
+            out[i] = _table_force(rows[i], grid_pwm, grid_f[i], pwm[i])
+    return out
+
+
+@njit(cache=True)
+def bank_pwm(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """PWM command of every thruster for a vector of thrusts (saturated to their ranges)."""
+    out = np.empty(rows.shape[0])
+    for i in range(rows.shape[0]):
+        if rows[i, K_KIND] == KIND_QUADRATIC:
+            out[i] = _quad_pwm(rows[i], force[i])
+        else:
+            out[i] = _table_pwm(rows[i], grid_pwm, grid_f[i], force[i])
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Python-level API
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class ThrusterBank:
+    """All thrusters of a vehicle in packed arrays (row i = thruster i)."""
+
+    names: tuple[str, ...]
+    rows: np.ndarray  # (n, 9) packed parameters
+    grid_pwm: np.ndarray  # (G,) common PWM grid of tabulated thrusters
+    grid_force: np.ndarray  # (n, G) thrust on the grid (zeros for quadratic thrusters)
+    f_min: np.ndarray  # most negative thrust each can give [N]
+    f_max: np.ndarray  # most positive thrust each can give [N]
+
+    @classmethod
+    def from_vehicle(cls, vehicle: Vehicle) -> "ThrusterBank":
+        return cls.from_thrusters(vehicle.thrusters)
+
+    @classmethod
+    def from_thrusters(cls, thrusters: tuple[Thruster, ...] | list[Thruster]) -> "ThrusterBank":
+        n = len(thrusters)
+        rows = np.zeros((n, 9))
+        grid_force = np.zeros((n, TABLE_PWM.size))
+        for i, t in enumerate(thrusters):
+            rows[i, K_NEUTRAL] = t.pwm_neutral_us
+            rows[i, K_DEAD] = t.deadband_us
+            rows[i, K_PMIN] = t.pwm_min_us
+            rows[i, K_PMAX] = t.pwm_max_us
+            if t.model == "quadratic":
+                assert t.curve is not None
+                rows[i, K_KIND] = KIND_QUADRATIC
+                rows[i, K_KLP:K_KNLN + 1] = (t.curve.K_L_pos, t.curve.K_NL_pos, t.curve.K_L_neg, t.curve.K_NL_neg)
+            else:
+                assert t.voltage is not None
+                rows[i, K_KIND] = KIND_TABLE
+                grid_force[i] = t200_force_table(t.voltage)
+        f_lo = bank_force(rows, TABLE_PWM, grid_force, rows[:, K_PMIN].copy())
+        f_hi = bank_force(rows, TABLE_PWM, grid_force, rows[:, K_PMAX].copy())
+        for arr in (rows, grid_force, f_lo, f_hi):
+            arr.setflags(write=False)
+        return cls(tuple(t.name for t in thrusters), rows, TABLE_PWM, grid_force, f_lo, f_hi)
+
+    def force(self, pwm_us: np.ndarray) -> np.ndarray:
+        """Thrust [N] for a PWM command per thruster (saturated)."""
+        return bank_force(self.rows, self.grid_pwm, self.grid_force, _vec(pwm_us, len(self.names), "pwm_us"))
+
+    def pwm(self, force: np.ndarray) -> np.ndarray:
+        """PWM [us] per thruster for a thrust per thruster (saturated)."""
+        return bank_pwm(self.rows, self.grid_pwm, self.grid_force, _vec(force, len(self.names), "force"))
+
+
+def _vec(values: np.ndarray, n: int, what: str) -> np.ndarray:
+    arr = np.ascontiguousarray(values, dtype=float)
+    if arr.shape != (n,):
+        raise ValueError(f"{what}: expected {n} values (one per thruster), got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what}: values must be finite, got {arr.tolist()}")
+    return arr
+
+
+def force_from_pwm(thruster: Thruster, pwm_us: float) -> float:
+    """Thrust [N] of one thruster for a PWM command [us] (saturated to its range)."""
+    return float(ThrusterBank.from_thrusters([thruster]).force(np.array([pwm_us]))[0])
+
+
+def pwm_from_force(thruster: Thruster, force: float) -> float:
+    """PWM command [us] giving a thrust [N] (saturated to the thruster's range)."""
+    return float(ThrusterBank.from_thrusters([thruster]).pwm(np.array([force]))[0])
+
+
+def thrust_limits(thruster: Thruster) -> tuple[float, float]:
+    """(most negative, most positive) thrust [N] within the PWM range."""
+    bank = ThrusterBank.from_thrusters([thruster])
+    return float(bank.f_min[0]), float(bank.f_max[0])

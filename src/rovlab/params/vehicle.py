@@ -1,0 +1,335 @@
+"""Vehicle description: frozen, validated parameters loaded from a closed-schema TOML file.
+
+Units are SI and radians; positions are in metres in the body frame (x forward, y starboard,
+z down) relative to the vehicle origin VO (= CG for the packaged vehicles). Hydrodynamic
+derivatives keep their SNAME signs (added mass and damping are <= 0). See docs/conventions.md
+and docs/vehicle-file.md for the file format.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from rovlab.params.validate import Collector, ConfigError, Problem, TableReader, read_toml
+
+DOF4 = ("surge", "sway", "heave", "yaw")
+WRENCH6 = ("X", "Y", "Z", "K", "M", "N")
+ADDED_MASS_KEYS = ("X_udot", "Y_vdot", "Z_wdot", "N_rdot")
+SENSOR_CHANNELS: dict[str, tuple[str, ...]] = {
+    "motion_capture": ("x", "y", "z", "phi", "theta", "psi"),
+    "pressure": ("z",),
+    "imu": ("phi", "theta", "psi", "r"),
+    "dvl": ("u", "v", "w"),
+}
+THRUST_TABLES = ("t200",)
+
+
+def _frozen(a: Any) -> np.ndarray:
+    arr = np.array(a, dtype=float)
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class QuadraticCurve:
+    """Dead-band thrust curve f = K_L s + K_NL s|s| with s = u -/+ d (SPEC section 3).
+
+    Coefficients are per microsecond of PWM offset: K_L in N/us, K_NL in N/us^2; all >= 0.
+    """
+
+    K_L_pos: float
+    K_NL_pos: float
+    K_L_neg: float
+    K_NL_neg: float
+
+
+@dataclass(frozen=True, eq=False)
+class Thruster:
+    name: str
+    position: np.ndarray  # r_i, body frame from VO [m]
+    direction: np.ndarray  # e_i, unit thrust direction for a positive command
+    model: str  # "quadratic" | "table"
+    curve: QuadraticCurve | None
+    table: str | None  # name of a packaged bollard-thrust table ("t200")
+    voltage: float | None  # supply voltage for a tabulated model [V]
+    pwm_min_us: float
+    pwm_max_us: float
+    pwm_neutral_us: float
+    deadband_us: float
+    source: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class Sensor:
+    name: str
+    kind: str  # a key of SENSOR_CHANNELS
+    position: np.ndarray  # lever arm l in the body frame [m]
+    rate_hz: float
+    variance: Mapping[str, float]  # channel -> variance (SI units squared)
+    source: str = ""
+
+    def channels(self) -> tuple[str, ...]:
+        return tuple(self.variance)
+
+
+@dataclass(frozen=True, eq=False)
+class Geometry:
+    length: float  # L along x [m]
+    width: float  # W along y [m]
+    height: float  # H along z [m]
+    area_front: float  # projected area seen from the front (YZ plane) [m^2]
+    area_side: float  # seen from the side (XZ plane) [m^2]
+    area_top: float  # seen from the top (XY plane) [m^2]
+    source: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class Vehicle:
+    """Everything rovlab knows about one vehicle. Immutable; use ``with_updates`` to change."""
+
+    name: str
+    description: str
+    mass: float  # m [kg]
+    I_zz: float  # yaw moment of inertia about VO [kg m^2] (the 4-DOF model needs no other)
+    r_g: np.ndarray  # CG from VO [m]
+    r_b: np.ndarray  # CB from VO [m]
+    displaced_volume: float  # [m^3]
+    water_density: float  # rho [kg/m^3]
+    gravity: float  # g [m/s^2]
+    added_mass: np.ndarray  # [X_udot, Y_vdot, Z_wdot, N_rdot] (<= 0)
+    damping_linear: np.ndarray  # [X_u, Y_v, Z_w, N_r] (<= 0)
+    damping_quadratic: np.ndarray  # [X_|u|u, Y_|v|v, Z_|w|w, N_|r|r] (<= 0)
+    damping_cubic: np.ndarray  # [X_uuu, Y_vvv, Z_www, N_rrr] (<= 0)
+    thrusters: tuple[Thruster, ...]
+    sensors: tuple[Sensor, ...]
+    geometry: Geometry | None = None
+    sources: Mapping[str, str] = field(default_factory=dict)
+    file: str = ""
+
+    @property
+    def weight(self) -> float:
+        """W = m g [N]."""
+        return self.mass * self.gravity
+
+    @property
+    def buoyancy(self) -> float:
+        """B = rho g Delta [N]."""
+        return self.water_density * self.gravity * self.displaced_volume
+
+    @property
+    def thruster_names(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.thrusters)
+
+    def thruster(self, name: str) -> Thruster:
+        for t in self.thrusters:
+            if t.name == name:
+                return t
+        raise KeyError(f"vehicle {self.name!r} has no thruster {name!r}; it has {', '.join(self.thruster_names)}")
+
+    def sensor(self, name: str) -> Sensor:
+        for s in self.sensors:
+            if s.name == name:
+                return s
+        names = ", ".join(s.name for s in self.sensors) or "none"
+        raise KeyError(f"vehicle {self.name!r} has no sensor {name!r}; it has {names}")
+
+    def with_updates(self, **changes: Any) -> "Vehicle":
+        """A copy with some fields replaced (arrays are copied and frozen)."""
+        fixed = {k: _frozen(v) if isinstance(v, (list, tuple, np.ndarray)) and k not in ("thrusters", "sensors") else v
+                 for k, v in changes.items()}
+        return replace(self, **fixed)
+
+
+# --------------------------------------------------------------------------------------------
+# Loading
+# --------------------------------------------------------------------------------------------
+
+def packaged_vehicle_names() -> list[str]:
+    folder = resources.files("rovlab.params") / "vehicles"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def packaged_vehicle_path(name: str) -> Path:
+    return Path(str(resources.files("rovlab.params") / "vehicles" / f"{name}.toml"))
+
+
+def resolve_vehicle_path(name_or_path: str | Path) -> Path:
+    """A packaged vehicle name (``udrone``) or a path to a TOML file."""
+    text = str(name_or_path)
+    path = Path(text)
+    if path.suffix == ".toml" or path.exists() or "/" in text:
+        return path
+    if text in packaged_vehicle_names():
+        return packaged_vehicle_path(text)
+    raise ConfigError(
+        [Problem(text, "", text, "a vehicle file path or a packaged vehicle name: "
+                 + ", ".join(packaged_vehicle_names()))], "vehicle")
+
+
+def load_vehicle(name_or_path: str | Path = "udrone") -> Vehicle:
+    """Load and validate a vehicle; raises :class:`ConfigError` listing every problem."""
+    path = resolve_vehicle_path(name_or_path)
+    data = read_toml(path)
+    return vehicle_from_dict(data, file=str(path))
+
+
+def check_vehicle_file(name_or_path: str | Path) -> list[Problem]:
+    """Every problem of a vehicle file (empty list when valid)."""
+    try:
+        load_vehicle(name_or_path)
+    except ConfigError as exc:
+        return exc.problems
+    return []
+
+
+def vehicle_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") -> Vehicle:
+    col = Collector(file)
+    top = TableReader(dict(data), col)
+    sources: dict[str, str] = {}
+
+    name = top.string("name")
+    description = top.string("description", "")
+    sources["vehicle"] = top.string("source")
+
+    rb = top.table("rigid_body")
+    sources["rigid_body"] = rb.string("source")
+    mass = rb.number("mass", positive=True, what="kg")
+    I_zz = rb.number("I_zz", positive=True, what="yaw moment of inertia about VO in kg m^2")
+    r_g = rb.vector("r_g", 3, default=[0.0, 0.0, 0.0], what="CG from VO in m")
+    rb.finish()
+
+    rs = top.table("restoring")
+    sources["restoring"] = rs.string("source")
+    volume = rs.number("displaced_volume", positive=True, what="m^3")
+    rho = rs.number("water_density", 1000.0, positive=True, what="kg/m^3")
+    grav = rs.number("gravity", 9.81, positive=True, what="m/s^2")
+    r_b = rs.vector("r_b", 3, default=[0.0, 0.0, 0.0], what="CB from VO in m")
+    rs.finish()
+
+    geometry = None
+    if top.has("geometry"):
+        gt = top.table("geometry")
+        vals = {k: gt.number(k, positive=True) for k in
+                ("length", "width", "height", "area_front", "area_side", "area_top")}
+        geometry = Geometry(**vals, source=gt.string("source"))
+        sources["geometry"] = geometry.source
+        gt.finish()
+
+    am = top.table("added_mass")
+    sources["added_mass"] = am.string("source")
+    added = np.array([am.number(k, nonpositive=True, what="SNAME sign: added mass is <= 0")
+                      for k in ADDED_MASS_KEYS])
+    am.finish()
+
+    dm = top.table("damping")
+    sources["damping"] = dm.string("source")
+    lin, quad, cub = np.zeros(4), np.zeros(4), np.zeros(4)
+    for i, dof in enumerate(DOF4):
+        d = dm.table(dof)
+        lin[i] = d.number("linear", nonpositive=True, what="SNAME sign: damping is <= 0")
+        quad[i] = d.number("quadratic", 0.0, nonpositive=True, what="SNAME sign: damping is <= 0")
+        cub[i] = d.number("cubic", 0.0, nonpositive=True, what="SNAME sign: damping is <= 0")
+        d.finish()
+    dm.finish()
+
+    thrusters = tuple(_read_thruster(t) for t in top.tables("thrusters", min_count=1))
+    names = [t.name for t in thrusters]
+    for dup in sorted({n for n in names if names.count(n) > 1}):
+        top.problem("thrusters", dup, "unique thruster names")
+
+    sensors = tuple(_read_sensor(s) for s in top.tables("sensors", required=False))
+    snames = [s.name for s in sensors]
+    for dup in sorted({n for n in snames if snames.count(n) > 1}):
+        top.problem("sensors", dup, "unique sensor names")
+    top.finish()
+
+    if not col.problems:
+        _check_configuration(thrusters, col)
+    col.raise_if_any("vehicle file")
+
+    return Vehicle(
+        name=name, description=description, mass=mass, I_zz=I_zz, r_g=_frozen(r_g),
+        r_b=_frozen(r_b), displaced_volume=volume, water_density=rho, gravity=grav,
+        added_mass=_frozen(added), damping_linear=_frozen(lin), damping_quadratic=_frozen(quad),
+        damping_cubic=_frozen(cub), thrusters=thrusters, sensors=sensors, geometry=geometry,
+        sources=sources, file=file,
+    )
+
+
+def _read_thruster(t: TableReader) -> Thruster:
+    name = t.string("name")
+    position = t.vector("position", 3, what="m from VO, body frame")
+    direction = t.vector("direction", 3, what="unit thrust direction")
+    if np.all(np.isfinite(direction)) and abs(float(np.linalg.norm(direction)) - 1.0) > 1e-6:
+        t.problem("direction", direction.tolist(),
+                  f"a unit vector (its norm is {np.linalg.norm(direction):.6g})")
+    model = t.string("model", "quadratic", choices=("quadratic", "table"))
+    curve = None
+    table = None
+    voltage = None
+    if model == "quadratic":
+        q = t.table("quadratic")
+        curve = QuadraticCurve(*(q.number(k, nonnegative=True, what="N/us or N/us^2")
+                                 for k in ("K_L_pos", "K_NL_pos", "K_L_neg", "K_NL_neg")))
+        q.finish()
+        if all(np.isfinite([curve.K_L_pos, curve.K_NL_pos])) and curve.K_L_pos + curve.K_NL_pos == 0:
+            t.problem("quadratic", "zero forward coefficients", "a curve that produces thrust")
+        if all(np.isfinite([curve.K_L_neg, curve.K_NL_neg])) and curve.K_L_neg + curve.K_NL_neg == 0:
+            t.problem("quadratic", "zero reverse coefficients", "a curve that produces thrust")
+        default_range = (1100.0, 1900.0)
+    elif model == "table":
+        tt = t.table("table")
+        table = tt.string("name", choices=THRUST_TABLES)
+        voltage = tt.number("voltage", lo=10.0, hi=20.0, what="supply voltage in V within the table's 10-20 V")
+        tt.finish()
+        default_range = (1100.0, 1900.0)
+    else:
+        default_range = (1100.0, 1900.0)
+    pwm_min = t.number("pwm_min_us", default_range[0], lo=500.0, hi=2500.0)
+    pwm_max = t.number("pwm_max_us", default_range[1], lo=500.0, hi=2500.0)
+    neutral = t.number("pwm_neutral_us", 1500.0, lo=500.0, hi=2500.0)
+    dead = t.number("deadband_us", 25.0, nonnegative=True)
+    if all(np.isfinite([pwm_min, pwm_max, neutral, dead])):
+        if not pwm_min + 0 < neutral - dead < neutral + dead < pwm_max:
+            t.problem("pwm_min_us", [pwm_min, neutral, dead, pwm_max],
+                      "pwm_min_us < pwm_neutral_us - deadband_us and pwm_neutral_us + deadband_us < pwm_max_us")
+    source = t.string("source", "")
+    t.finish()
+    return Thruster(name=name, position=_frozen(position), direction=_frozen(direction), model=model,
+                    curve=curve, table=table, voltage=voltage, pwm_min_us=pwm_min, pwm_max_us=pwm_max,
+                    pwm_neutral_us=neutral, deadband_us=dead, source=source)
+
+
+def _read_sensor(s: TableReader) -> Sensor:
+    name = s.string("name")
+    kind = s.string("kind", choices=tuple(SENSOR_CHANNELS))
+    position = s.vector("position", 3, default=[0.0, 0.0, 0.0], what="lever arm in m, body frame")
+    rate = s.number("rate_hz", positive=True)
+    channels = SENSOR_CHANNELS.get(kind, ())
+    variance = s.numbers_table("variance", channels, positive=True)
+    if kind in SENSOR_CHANNELS and not variance:
+        s.problem("variance", {}, "a variance for at least one of " + ", ".join(channels))
+    source = s.string("source", "")
+    s.finish()
+    return Sensor(name=name, kind=kind, position=_frozen(position), rate_hz=rate,
+                  variance=dict(variance), source=source)
+
+
+def _check_configuration(thrusters: tuple[Thruster, ...], col: Collector) -> None:
+    """Every DOF of the 4-DOF model (X, Y, Z, N) must be producible independently."""
+    # Columns [e_i; r_i x e_i] (rovlab.allocation builds the full matrix; only X, Y, Z, N here).
+    e = np.array([t.direction for t in thrusters]).T
+    moment_n = np.cross(np.array([t.position for t in thrusters]), e.T)[:, 2]
+    B4 = np.vstack([e, moment_n])
+    for j, label in zip(range(4), ("X (surge)", "Y (sway)", "Z (heave)", "N (yaw)")):
+        unit = np.zeros(4)
+        unit[j] = 1.0
+        sol, *_ = np.linalg.lstsq(B4, unit, rcond=None)
+        if np.linalg.norm(B4 @ sol - unit) > 1e-6:
+            col.add("thrusters", f"{len(thrusters)} thrusters",
+                    f"a thruster configuration that can produce {label} independently of the other DOFs")
