@@ -186,23 +186,38 @@ def nu_dot_reference(vehicle: Vehicle, nu: np.ndarray, tau: np.ndarray, b: np.nd
     return np.linalg.solve(mass_matrix(vehicle), np.asarray(tau, dtype=float) + bias - lhs)
 
 
-def linearise(vehicle: Vehicle, eta0: np.ndarray, nu0: np.ndarray, tau0: np.ndarray,
-              step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
-    """A = df/dx, B = df/dtau of x_dot = f(x, tau), x = [eta; nu], by central differences."""
-    p = _packed(vehicle)
-    x0 = np.concatenate([np.asarray(eta0, float), np.asarray(nu0, float)])
-    tau0 = np.asarray(tau0, dtype=float)
-    zero = np.zeros(4)
-    A = np.empty((8, 8))
-    B = np.empty((8, 4))
-    for j in range(8):
-        dx = np.zeros(8)
-        dx[j] = step
-        A[:, j] = (plant_rhs(p, x0 + dx, tau0, zero) - plant_rhs(p, x0 - dx, tau0, zero)) / (2 * step)
-    for j in range(4):
-        du = np.zeros(4)
-        du[j] = step
-        B[:, j] = (plant_rhs(p, x0, tau0 + du, zero) - plant_rhs(p, x0, tau0 - du, zero)) / (2 * step)
+def linearise(vehicle: Vehicle, eta0: np.ndarray, nu0: np.ndarray,
+              tau0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Analytic Jacobians A = df/dx, B = df/dtau of x_dot = f(x, tau), x = [eta; nu].
+
+    The operating force tau0 does not enter the Jacobians (the model is affine in tau); it is
+    accepted so a call names the full operating point.
+    """
+    del tau0
+    eta0 = np.asarray(eta0, dtype=float)
+    u, v, w, r = np.asarray(nu0, dtype=float)
+    nu = np.array([u, v, w, r])
+    m = vehicle.mass
+    x_g, y_g = vehicle.r_g[0], vehicle.r_g[1]
+    Xu, Yv = vehicle.added_mass[0], vehicle.added_mass[1]
+    # d(C(nu) nu)/d nu, rows X, Y, Z, N
+    dC = np.array([
+        [0.0, (-m + Yv) * r, 0.0, -m * (v + 2 * x_g * r) + Yv * v],
+        [(m - Xu) * r, 0.0, 0.0, m * (u - 2 * y_g * r) - Xu * u],
+        [0.0, 0.0, 0.0, 0.0],
+        [m * x_g * r + (Xu - Yv) * v, (Xu - Yv) * u + m * y_g * r, 0.0, m * (x_g * u + y_g * v)],
+    ])
+    dD = np.diag(vehicle.damping_linear + 2 * vehicle.damping_quadratic * np.abs(nu)
+                 + 3 * vehicle.damping_cubic * nu**2)
+    Minv = np.linalg.inv(mass_matrix(vehicle))
+    psi = float(eta0[3])
+    c, s = np.cos(psi), np.sin(psi)
+    A = np.zeros((8, 8))
+    A[0, 3] = -s * u - c * v
+    A[1, 3] = c * u - s * v
+    A[:4, 4:] = J(psi)
+    A[4:, 4:] = Minv @ (dD - dC)
+    B = np.vstack([np.zeros((4, 4)), Minv])
     return A, B
 
 

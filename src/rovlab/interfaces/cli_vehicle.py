@@ -1,0 +1,224 @@
+"""Sub-commands on vehicles: ``vehicle show``, ``vehicle check``, ``thruster``, ``allocate``.
+
+Interfaces hold no maths: these only load, call the core and format the answer.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+from rovlab.params.validate import ConfigError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    veh = sub.add_parser("vehicle", help="show or check a vehicle description")
+    vsub = veh.add_subparsers(dest="vehicle_command", metavar="ACTION")
+    vsub.required = True
+    show = vsub.add_parser("show", help="print a vehicle's parameters and configuration matrix")
+    show.add_argument("vehicle", nargs="?", default="udrone", help="packaged name or TOML file (default: udrone)")
+    show.add_argument("--json", action="store_true", help="machine-readable output")
+    show.set_defaults(func=_cmd_show)
+    check = vsub.add_parser("check", help="validate a vehicle file, listing every problem (exit 2 if any)")
+    check.add_argument("file", help="packaged name or TOML file")
+    check.set_defaults(func=_cmd_check)
+    lst = vsub.add_parser("list", help="list the packaged vehicles")
+    lst.set_defaults(func=_cmd_list)
+
+    thr = sub.add_parser("thruster", help="convert between PWM command and thrust for one thruster")
+    thr.add_argument("--vehicle", default="udrone", help="packaged name or TOML file (default: udrone)")
+    thr.add_argument("--thruster", required=True, help="thruster name, e.g. T1")
+    group = thr.add_mutually_exclusive_group(required=True)
+    group.add_argument("--force", type=float, help="thrust [N] -> PWM")
+    group.add_argument("--pwm", type=float, help="PWM pulse width [us] -> thrust")
+    thr.add_argument("--voltage", type=float, help="supply voltage [V] for a tabulated (T200) thruster")
+    thr.add_argument("--json", action="store_true", help="machine-readable output")
+    thr.set_defaults(func=_cmd_thruster)
+
+    alloc = sub.add_parser("allocate", help="allocate a wrench to thruster forces and PWM commands")
+    alloc.add_argument("--vehicle", default="udrone", help="packaged name or TOML file (default: udrone)")
+    alloc.add_argument("--wrench", type=float, nargs="+", required=True, metavar="V",
+                       help="X Y Z N [N, N m] (K = M = 0 demanded) or X Y Z K M N")
+    alloc.add_argument("--mode", choices=("priority", "scale", "unconstrained"), default="priority",
+                       help="priority: give up lower-priority DOFs first (K,M > Z > N > X,Y); "
+                            "scale: keep the wrench direction; unconstrained: plain pseudo-inverse")
+    alloc.add_argument("--json", action="store_true", help="machine-readable output")
+    alloc.set_defaults(func=_cmd_allocate)
+
+
+def _load(name: str):
+    from rovlab.params.vehicle import load_vehicle
+
+    return load_vehicle(name)
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from rovlab.params.vehicle import load_vehicle, packaged_vehicle_names
+
+    for name in packaged_vehicle_names():
+        v = load_vehicle(name)
+        print(f"{name:16s} {v.description}")
+    return 0
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from rovlab.allocation import Allocator, configuration_matrix
+
+    v = _load(args.vehicle)
+    B = configuration_matrix(v)
+    alloc = Allocator(v)
+    info: dict[str, Any] = {
+        "name": v.name,
+        "description": v.description,
+        "file": v.file,
+        "mass": v.mass,
+        "I_zz": v.I_zz,
+        "weight": v.weight,
+        "buoyancy": v.buoyancy,
+        "r_g": v.r_g.tolist(),
+        "r_b": v.r_b.tolist(),
+        "added_mass": dict(zip(("X_udot", "Y_vdot", "Z_wdot", "N_rdot"), v.added_mass.tolist())),
+        "damping": {
+            dof: {"linear": float(v.damping_linear[i]), "quadratic": float(v.damping_quadratic[i]),
+                  "cubic": float(v.damping_cubic[i])}
+            for i, dof in enumerate(("surge", "sway", "heave", "yaw"))
+        },
+        "thrusters": list(v.thruster_names),
+        "thruster_details": [
+            {
+                "name": t.name, "position": t.position.tolist(), "direction": t.direction.tolist(),
+                "model": t.model,
+                "curve": dataclasses.asdict(t.curve) if t.curve else {"table": t.table, "voltage": t.voltage},
+                "pwm_range_us": [t.pwm_min_us, t.pwm_max_us], "deadband_us": t.deadband_us,
+                "thrust_limits": [float(alloc.f_min[i]), float(alloc.f_max[i])],
+            }
+            for i, t in enumerate(v.thrusters)
+        ],
+        "sensors": [
+            {"name": s.name, "kind": s.kind, "position": s.position.tolist(), "rate_hz": s.rate_hz,
+             "variance": dict(s.variance)}
+            for s in v.sensors
+        ],
+        "configuration_matrix": B.tolist(),
+        "configuration_rank": int(np.linalg.matrix_rank(B)),
+        "sources": dict(v.sources),
+    }
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"{v.name}: {v.description}")
+    print(f"  file        {v.file}")
+    print(f"  mass        {v.mass:g} kg   I_zz {v.I_zz:g} kg m^2")
+    print(f"  weight      {v.weight:.2f} N   buoyancy {v.buoyancy:.2f} N   net {v.buoyancy - v.weight:+.2f} N (up)")
+    print("  added mass  " + "  ".join(f"{k} {val:g}" for k, val in info["added_mass"].items()))
+    print("  damping     DOF      linear   |x|x      x^3")
+    for dof, d in info["damping"].items():
+        print(f"              {dof:6s} {d['linear']:8.3f} {d['quadratic']:8.3f} {d['cubic']:8.2f}")
+    print("  thrusters   name  position [m]               direction        model      limits [N]")
+    for td in info["thruster_details"]:
+        pos = " ".join(f"{x:+.3f}" for x in td["position"])
+        dirn = " ".join(f"{x:+.2f}" for x in td["direction"])
+        lo, hi = td["thrust_limits"]
+        print(f"              {td['name']:5s} [{pos}]  [{dirn}]  {td['model']:9s}  {lo:+.1f} .. {hi:+.1f}")
+    print("  sensors     " + ", ".join(f"{s['name']} ({s['kind']}, {s['rate_hz']:g} Hz)" for s in info["sensors"]))
+    print(f"  configuration matrix B (rows X Y Z K M N; rank {info['configuration_rank']}):")
+    print("              " + "".join(f"{n:>9s}" for n in v.thruster_names))
+    for label, row in zip("XYZKMN", B):
+        print(f"            {label} " + "".join(f"{x:9.4f}" for x in row))
+    return 0
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from rovlab.params.vehicle import check_vehicle_file
+
+    problems = check_vehicle_file(args.file)
+    if not problems:
+        print(f"{args.file}: ok")
+        return 0
+    print(f"{args.file}: {len(problems)} problem{'s' if len(problems) != 1 else ''}")
+    for p in problems:
+        print(f"  - {p}")
+    return 2
+
+
+def _cmd_thruster(args: argparse.Namespace) -> int:
+    from rovlab.interfaces.cli import UserError
+    from rovlab.models.thrusters import force_from_pwm, pwm_from_force, thrust_limits
+
+    v = _load(args.vehicle)
+    try:
+        t = v.thruster(args.thruster)
+    except KeyError as exc:
+        raise UserError(exc.args[0]) from None
+    if args.voltage is not None:
+        if t.model != "table":
+            raise UserError(f"--voltage applies to tabulated thrusters; {t.name} uses the {t.model} model")
+        if not 10.0 <= args.voltage <= 20.0:
+            raise UserError(f"--voltage {args.voltage:g}: the T200 tables cover 10-20 V")
+        t = dataclasses.replace(t, voltage=args.voltage)
+    value = args.force if args.force is not None else args.pwm
+    if not math.isfinite(value):
+        raise UserError(f"{'--force' if args.force is not None else '--pwm'} must be a finite number")
+    f_lo, f_hi = thrust_limits(t)
+    if args.force is not None:
+        pwm = pwm_from_force(t, args.force)
+        saturated = not f_lo <= args.force <= f_hi
+        out = {"thruster": t.name, "force": args.force, "pwm_us": pwm, "saturated": saturated,
+               "achieved_force": force_from_pwm(t, pwm)}
+    else:
+        saturated = not t.pwm_min_us <= args.pwm <= t.pwm_max_us
+        out = {"thruster": t.name, "pwm_us": args.pwm, "force": force_from_pwm(t, args.pwm),
+               "saturated": saturated}
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    if args.force is not None:
+        print(f"{t.name}: {args.force:g} N -> {out['pwm_us']:.2f} us")
+    else:
+        print(f"{t.name}: {args.pwm:g} us -> {out['force']:.4f} N")
+    if saturated:
+        print(f"  saturated: range {t.pwm_min_us:g}-{t.pwm_max_us:g} us, thrust {f_lo:.2f} .. {f_hi:.2f} N"
+              + (f"; gives {out['achieved_force']:.3f} N" if args.force is not None else ""))
+    return 0
+
+
+def _cmd_allocate(args: argparse.Namespace) -> int:
+    from rovlab.allocation import SCALE_ALL, Allocator
+    from rovlab.interfaces.cli import UserError
+
+    if len(args.wrench) not in (4, 6):
+        raise UserError(f"--wrench takes 4 values (X Y Z N) or 6 (X Y Z K M N), got {len(args.wrench)}")
+    if not all(math.isfinite(x) for x in args.wrench):
+        raise UserError(f"--wrench values must be finite, got {args.wrench}")
+    v = _load(args.vehicle)
+    if args.mode == "unconstrained":
+        alloc = Allocator(v, saturation=False)
+    elif args.mode == "scale":
+        alloc = Allocator(v, priority=SCALE_ALL)
+    else:
+        alloc = Allocator(v)
+    res = alloc.allocate(np.array(args.wrench))
+    if args.json:
+        print(json.dumps(res.as_dict()))
+        return 0
+    print(f"{v.name}: allocation ({args.mode})")
+    print("  DOF   demanded   achieved")
+    for label, d, a in zip(("X", "Y", "Z", "K", "M", "N"), res.demanded, res.achieved):
+        print(f"  {label}   {d:9.3f}  {a:9.3f}")
+    print("  thruster   force [N]   pwm [us]   limits [N]")
+    for i, name in enumerate(res.thruster_names):
+        print(f"  {name:8s} {res.forces[i]:10.3f} {res.pwm_us[i]:10.1f}   {alloc.f_min[i]:+.1f} .. {alloc.f_max[i]:+.1f}")
+    if res.saturated:
+        print("  saturated: " + ", ".join(f"{d} at {f:.0%}" for d, f in
+                                          zip(("X", "Y", "Z", "K", "M", "N"), res.fraction) if f < 1 - 1e-6))
+    else:
+        print("  not saturated")
+    return 0
+
+
+__all__ = ["register", "ConfigError"]
