@@ -17,6 +17,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/rovlab vehicle show udrone
+	$(BIN)/rovlab allocate --wrench 0 0 10 0
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
