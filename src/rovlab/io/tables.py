@@ -1,0 +1,250 @@
+"""Small numeric CSV tables: the data files of the lab experiments (and the maker's T200 tables).
+
+Format: UTF-8 text (a byte-order mark is ignored), one header line of comma-separated column
+names, then one row of numbers per line. Lines starting with ``#`` are comments (the virtual lab
+writes its seed and true parameters there); blank lines are skipped; CRLF line endings and
+trailing empty fields (``1100,-2.90,``) are accepted. Every value must be a finite number.
+
+Every problem is reported as a :class:`rovlab.params.validate.ConfigError` naming the file, the
+line and the column, so that command-line tools print it without a traceback::
+
+    runs.csv: line 7, column 'force_n': got 'abc'; expected a number
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from rovlab.params.edit import atomic_write_text
+from rovlab.params.validate import ConfigError, Problem
+
+_MAX_PROBLEMS = 20  # stop collecting after this many bad cells (the rest are likely the same)
+
+
+@dataclass(frozen=True, eq=False)
+class DataTable:
+    """Columns of one CSV file as float arrays, with the file line of every row."""
+
+    file: str
+    columns: tuple[str, ...]
+    data: Mapping[str, np.ndarray]
+    lines: np.ndarray  # 1-based line number in the file of each row
+    comments: tuple[str, ...] = ()  # comment lines (without the leading '#')
+
+    def __len__(self) -> int:
+        return int(self.lines.size)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self.data:
+            raise ConfigError([Problem(self.file, "columns", list(self.columns),
+                                       f"a column named {name!r}")], "data file")
+        return self.data[name]
+
+    def has(self, name: str) -> bool:
+        return name in self.data
+
+    def require(self, *names: str) -> None:
+        """Raise a :class:`ConfigError` naming every missing column."""
+        missing = [n for n in names if n not in self.data]
+        if missing:
+            raise ConfigError([Problem(
+                self.file, "header", ", ".join(self.columns) or "(no columns)",
+                "columns " + ", ".join(names) + " (missing: " + ", ".join(missing) + ")")], "data file")
+
+    def problem(self, row: int | None, column: str | None, value: object, expected: str) -> ConfigError:
+        """A :class:`ConfigError` pointing at one row (index into the arrays) and column."""
+        return ConfigError([Problem(self.file, _where(self, row, column), value, expected)], "data file")
+
+    def select(self, mask: np.ndarray) -> "DataTable":
+        """The rows where ``mask`` is true (same columns, same file)."""
+        mask = np.asarray(mask, dtype=bool)
+        return DataTable(self.file, self.columns, {k: v[mask] for k, v in self.data.items()},
+                         self.lines[mask], self.comments)
+
+    def meta(self) -> dict[str, str]:
+        """``key = value`` pairs found in the comment lines (e.g. ``seed = 7``)."""
+        out: dict[str, str] = {}
+        for line in self.comments:
+            if "=" in line:
+                key, _, value = line.partition("=")
+                if key.strip() and " " not in key.strip():
+                    out[key.strip()] = value.strip()
+        return out
+
+
+def _where(table: DataTable, row: int | None, column: str | None) -> str:
+    parts = []
+    if row is not None and 0 <= row < len(table):
+        parts.append(f"line {int(table.lines[row])}")
+    if column is not None:
+        parts.append(f"column {column!r}")
+    return ", ".join(parts)
+
+
+def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "data file") -> DataTable:
+    """Read a numeric CSV file; raise :class:`ConfigError` naming file, line and column on any problem.
+
+    ``required`` columns are checked before the values, so a file with the wrong header gets
+    one clear message instead of a list of bad cells.
+    """
+    path = Path(path)
+    file = str(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise ConfigError([Problem(file, "", "no such file", "an existing CSV file")], what) from None
+    except IsADirectoryError:
+        raise ConfigError([Problem(file, "", "a directory", "a CSV file")], what) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError([Problem(file, "", "undecodable bytes", f"UTF-8 text ({exc.reason} at byte "
+                                   f"{exc.start})")], what) from None
+
+    comments: list[str] = []
+    header: list[str] | None = None
+    header_line = 0
+    rows: list[list[str]] = []
+    row_lines: list[int] = []
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            comments.append(line[1:].strip())
+            continue
+        cells = [c.strip() for c in line.split(",")]
+        if header is None:
+            header, header_line = _trim(cells), number
+            continue
+        rows.append(cells)
+        row_lines.append(number)
+
+    if header is None:
+        raise ConfigError([Problem(file, "", "an empty file", "a header line of column names, e.g. "
+                                   + (", ".join(required) if required else "time_s, ..."))], what)
+    problems: list[Problem] = []
+    where_header = f"line {header_line} (header)"
+    if len(header) == 1 and required and len(required) > 1:
+        sep = next((s for s in (";", "\t", " ") if s in header[0]), None)
+        hint = f" (found {sep!r}-separated names)" if sep else ""
+        problems.append(Problem(file, where_header, header[0],
+                                "comma-separated column names " + ", ".join(required) + hint))
+        raise ConfigError(problems, what)
+    for i, name in enumerate(header):
+        if not name:
+            problems.append(Problem(file, where_header, f"column {i + 1} has no name", "a name for every column"))
+        elif _is_number(name):
+            problems.append(Problem(file, where_header, name, "column names (the header line is missing)"))
+            break
+    dups = sorted({n for n in header if n and header.count(n) > 1})
+    if dups:
+        problems.append(Problem(file, where_header, ", ".join(dups), "unique column names"))
+    if problems:
+        raise ConfigError(problems, what)
+    missing = [n for n in required if n not in header]
+    if missing:
+        raise ConfigError([Problem(file, where_header, ", ".join(header),
+                                   "columns " + ", ".join(required) + " (missing: " + ", ".join(missing) + ")")],
+                          what)
+    if not rows:
+        raise ConfigError([Problem(file, "", "no data rows", "at least one row of numbers after the header")], what)
+
+    n = len(header)
+    values = np.empty((len(rows), n))
+    for r, (cells, number) in enumerate(zip(rows, row_lines)):
+        if len(cells) > n and not any(cells[n:]):
+            cells = cells[:n]
+        if len(cells) != n:
+            problems.append(Problem(file, f"line {number}", f"{len(cells)} values",
+                                    f"{n} values, one per column ({', '.join(header)})"))
+        else:
+            for c, cell in enumerate(cells):
+                try:
+                    x = float(cell)
+                except ValueError:
+                    problems.append(Problem(file, f"line {number}, column {header[c]!r}", cell or "(empty)",
+                                            "a number"))
+                    continue
+                if not math.isfinite(x):
+                    problems.append(Problem(file, f"line {number}, column {header[c]!r}", cell,
+                                            "a finite number"))
+                values[r, c] = x
+        if len(problems) >= _MAX_PROBLEMS:
+            problems.append(Problem(file, "", "more bad rows", "(stopped after the first "
+                                    f"{_MAX_PROBLEMS} problems)"))
+            break
+    if problems:
+        raise ConfigError(problems, what)
+    data = {name: values[:, i].copy() for i, name in enumerate(header)}
+    for arr in data.values():
+        arr.setflags(write=False)
+    lines = np.asarray(row_lines, dtype=int)
+    lines.setflags(write=False)
+    return DataTable(file, tuple(header), data, lines, tuple(comments))
+
+
+def _trim(cells: list[str]) -> list[str]:
+    while cells and not cells[-1]:
+        cells.pop()
+    return cells
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def write_table(path: str | Path, columns: Mapping[str, Iterable[float]], *,
+                comments: Sequence[str] = (), formats: Mapping[str, str] | None = None) -> Path:
+    """Write columns (all the same length) as CSV, with ``# comment`` lines first; atomic replace.
+
+    ``formats`` maps a column to a ``format()`` spec (default ``.9g``; ``d`` for integers).
+    """
+    path = Path(path)
+    names = list(columns)
+    arrays = [np.asarray(list(v) if not isinstance(v, np.ndarray) else v) for v in columns.values()]
+    sizes = {a.shape[0] for a in arrays}
+    if len(sizes) > 1:
+        raise ValueError(f"columns differ in length: {dict(zip(names, (a.shape[0] for a in arrays)))}")
+    fmts = [(formats or {}).get(name, ".9g") for name in names]
+    lines = [f"# {c}" if c else "#" for c in comments]
+    lines.append(",".join(names))
+    for row in zip(*arrays):
+        lines.append(",".join(format(int(x) if f == "d" else float(x), f) for x, f in zip(row, fmts)))
+    atomic_write_text(path, "\n".join(lines) + "\n")
+    return path
+
+
+def split_runs(table: DataTable, column: str = "run") -> list[tuple[int, DataTable]]:
+    """The rows of each run (integer ``column``), in order of first appearance.
+
+    A run's rows need not be contiguous in the file, but each run's time must increase.
+    """
+    ids = table[column]
+    bad = np.flatnonzero(ids != np.round(ids))
+    if bad.size:
+        raise table.problem(int(bad[0]), column, float(ids[bad[0]]), "an integer run number")
+    order: list[int] = []
+    seen: set[int] = set()
+    for x in ids.astype(int):
+        if int(x) not in seen:
+            seen.add(int(x))
+            order.append(int(x))
+    return [(rid, table.select(ids.astype(int) == rid)) for rid in order]
+
+
+def require_increasing(table: DataTable, column: str = "time_s") -> None:
+    """Raise naming the first row where ``column`` does not strictly increase."""
+    x = table[column]
+    bad = np.flatnonzero(np.diff(x) <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise table.problem(i, column, float(x[i]), f"a value greater than the previous row's {float(x[i - 1]):g} "
+                            "(time must increase)")

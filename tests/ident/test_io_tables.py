@@ -1,0 +1,82 @@
+"""Lab data files (rovlab.io.tables): every malformed file gets a message naming file, line and column."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rovlab.io.tables import read_table, split_runs, write_table
+from rovlab.params import ConfigError
+
+
+def _write(tmp_path, text, name="log.csv", raw=False):
+    path = tmp_path / name
+    if raw:
+        path.write_bytes(text)
+    else:
+        path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_round_trip_with_comments(tmp_path):
+    path = tmp_path / "x.csv"
+    write_table(path, {"run": [1, 1, 2], "time_s": [0.0, 0.1, 0.0]}, comments=["seed = 4", "hello"],
+                formats={"run": "d"})
+    t = read_table(path, required=("run", "time_s"))
+    assert t.columns == ("run", "time_s")
+    np.testing.assert_array_equal(t["run"], [1, 1, 2])
+    assert t.meta() == {"seed": "4"}
+    assert list(t.lines) == [4, 5, 6]
+    assert [rid for rid, _ in split_runs(t)] == [1, 2]
+
+
+def test_bom_crlf_and_trailing_commas_are_accepted(tmp_path):
+    path = _write(tmp_path, "\ufeff PWM (µs), Force (Kg f),\r\n1100,-2.90,\r\n1104,-2.92,\r\n".encode("utf-8"), raw=True)
+    t = read_table(path)
+    assert t.columns == ("PWM (µs)", "Force (Kg f)")
+    np.testing.assert_array_equal(t["Force (Kg f)"], [-2.90, -2.92])
+
+
+@pytest.mark.parametrize("text, message", [
+    ("time_s,pwm_us,force_n\n0,1500,abc\n", "log.csv: line 2, column 'force_n': got 'abc'; expected a number"),
+    ("time_s,pwm_us,force_n\n0,1500\n", "log.csv: line 2: got '2 values'; expected 3 values"),
+    ("time_s,pwm_us,force_n\n0,1500,nan\n", "line 2, column 'force_n': got 'nan'; expected a finite number"),
+    ("time_s,pwm_us\n0,1500\n", "missing: force_n"),
+    ("time_s;pwm_us;force_n\n0;1500;1\n", "found ';'-separated names"),
+    ("# only a comment\n", "an empty file"),
+    ("time_s,pwm_us,force_n\n", "no data rows"),
+    ("0,1500,1\n1,1500,1\n", "the header line is missing"),
+    ("time_s,time_s,force_n\n0,1,2\n", "unique column names"),
+])
+def test_malformed_files(tmp_path, text, message):
+    path = _write(tmp_path, text)
+    with pytest.raises(ConfigError) as err:
+        read_table(path, required=("time_s", "pwm_us", "force_n"))
+    assert message in str(err.value)
+
+
+def test_missing_and_undecodable_files(tmp_path):
+    with pytest.raises(ConfigError, match="no such file"):
+        read_table(tmp_path / "nope.csv")
+    path = _write(tmp_path, b"time_s\n\xff\xfe\n", raw=True)
+    with pytest.raises(ConfigError, match="UTF-8"):
+        read_table(path)
+
+
+def test_many_bad_cells_are_capped(tmp_path):
+    path = _write(tmp_path, "a\n" + "x\n" * 50)
+    with pytest.raises(ConfigError) as err:
+        read_table(path)
+    assert len(err.value.problems) == 21
+    assert "stopped after the first 20" in str(err.value)
+
+
+def test_non_integer_run_and_backwards_time_are_named(tmp_path):
+    from rovlab.io.tables import require_increasing
+
+    t = read_table(_write(tmp_path, "run,time_s\n1,0\n1.5,0.1\n"))
+    with pytest.raises(ConfigError, match="line 3, column 'run': got 1.5; expected an integer run number"):
+        split_runs(t)
+    t = read_table(_write(tmp_path, "time_s\n0\n0.2\n0.1\n", name="b.csv"))
+    with pytest.raises(ConfigError, match="b.csv: line 4, column 'time_s': got 0.1"):
+        require_increasing(t)
