@@ -112,3 +112,10 @@ def test_paths_and_number_format():
     assert format_float(0.0607) == "0.0607"
     assert format_float(25.0) == "25.0"
     assert float(format_float(1.189622e-04)) == 1.189622e-04
+
+
+def test_unchanged_values_keep_their_spelling(udrone_copy):
+    before = udrone_copy.read_text(encoding="utf-8")
+    edit_vehicle_file(udrone_copy, {"thrusters[name=T1].deadband_us": 25.0, "thrusters[name=T1].model": "quadratic",
+                                    "thrusters[name=T1].quadratic": {"K_L_pos": 0.0607}})
+    assert udrone_copy.read_text(encoding="utf-8") == before  # 25 stays 25, 6.07e-2 stays 6.07e-2

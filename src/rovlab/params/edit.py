@@ -117,6 +117,10 @@ def _item(value: Any, old: Any = None) -> Any:
         new = tomlkit.inline_table()
         for k, v in value.items():
             new[k] = _item(v)
+        keys = list(value)
+        if keys:  # "{ a = 1, b = 2 }", the spacing the packaged files use
+            new[keys[0]].trivia.indent = " "
+            new[keys[-1]].trivia.trail = " "
     elif isinstance(value, (list, tuple)):
         new = tomlkit.array()
         for v in value:
@@ -131,6 +135,15 @@ def _item(value: Any, old: Any = None) -> Any:
         new.trivia.trail = trivia.trail
         new.trivia.indent = trivia.indent
     return new
+
+
+def _same(old: Any, value: Any) -> bool:
+    plain = old.unwrap() if hasattr(old, "unwrap") else old
+    if isinstance(plain, bool) or isinstance(value, bool):
+        return plain is value
+    if isinstance(plain, (int, float)) and isinstance(value, (int, float)):
+        return float(plain) == float(value)
+    return isinstance(plain, str) and isinstance(value, str) and plain == value
 
 
 def _is_table(x: Any) -> bool:
@@ -185,6 +198,8 @@ def _assign(node: Any, key: str, value: Any, where: str) -> None:
             del node[key]
         return
     old = node[key] if key in node else None
+    if old is not None and not _is_table(old) and _same(old, value):
+        return  # unchanged: keep the file's own spelling (25 stays 25, 7.22e-2 stays 7.22e-2)
     if isinstance(value, Mapping) and old is not None and _is_table(old):
         for k, v in value.items():  # merge, keeping the layout and comments of the existing table
             _assign(old, k, v, f"{where}.{k}")
