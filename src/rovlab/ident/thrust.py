@@ -201,6 +201,13 @@ def fit_thrust_curve(pwm_us: np.ndarray, force_n: np.ndarray, *, neutral_us: flo
                 f"the {side} curve needs at least {MIN_POINTS_PER_SIDE} steady points with PWM {rel} "
                 f"{bound:g} us (outside the dead band); found {n}")
 
+    for mask, side, want in ((u > d0, "forward", 1.0), (u < -d0, "reverse", -1.0)):
+        if want * float(np.mean(f[mask])) <= 0:
+            raise IdentificationError(
+                f"the {side} steps produce {'negative' if want > 0 else 'positive'} thrust on average: force_n must "
+                "be the thrust the thruster produces, positive for a forward command (check the load cell's sign "
+                "or the thruster's mounting)")
+
     def model(p: np.ndarray) -> np.ndarray:
         d = p[4] if fit_d else d0
         return curve_force(u, d, p[0], p[1], p[2], p[3])
@@ -302,5 +309,6 @@ def thrust_edits(fit: ThrustFit, thrusters: Sequence[str], *, digits: int = 4) -
         edits[f"{block}.quadratic"] = curve
         edits[f"{block}.table"] = DELETE
         edits[f"{block}.deadband_us"] = significant(fit.deadband_us, 4)
-        edits[f"{block}.pwm_neutral_us"] = fit.neutral_us
+        if fit.neutral_us != NEUTRAL_US:
+            edits[f"{block}.pwm_neutral_us"] = fit.neutral_us
     return edits
