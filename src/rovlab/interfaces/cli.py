@@ -11,6 +11,7 @@ from typing import Sequence
 # Modules providing sub-commands: each has register(subparsers) -> None.
 _COMMAND_MODULES = (
     "rovlab.interfaces.cli_vehicle",
+    "rovlab.interfaces.cli_ident",
 )
 
 

@@ -1,0 +1,588 @@
+"""Sub-commands ``identify``, ``added-mass`` and ``lab`` (SPEC section 9; docs/identification.md).
+
+Interfaces hold no maths: these read files, call :mod:`rovlab.ident`, print the result (a table,
+or JSON with ``--json``), draw the fit's PNG and, with ``--update``, write the estimates into a
+vehicle file through :mod:`rovlab.params.edit` (validated before anything is written).
+
+Plots: by default each ``identify`` writes ``<input stem>-<tool>.png`` next to the input file
+(``--plot PNG`` to choose, ``--no-plot`` to skip); ``added-mass`` plots only with ``--plot``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any, Callable
+
+SIGN_NOTE = ("Coefficients use SNAME signs: added mass and damping derivatives are negative "
+             "(X_udot = -5.5 means 5.5 kg of added mass).")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+    common.add_argument("--plot", metavar="PNG", help="write the fit's figure here (default: <input stem>-<tool>.png "
+                        "next to the input file)")
+    common.add_argument("--no-plot", action="store_true", help="do not write a figure")
+    common.add_argument("--update", metavar="VEHICLE.toml",
+                        help="write the estimates into this vehicle file (comments kept, source note added, "
+                             "validated before writing)")
+
+    ident = sub.add_parser("identify", help="identify vehicle parameters from lab data (SPEC 9)",
+                           description="Identify vehicle parameters from the logs of the lab experiments. " + SIGN_NOTE)
+    isub = ident.add_subparsers(dest="ident_command", metavar="EXPERIMENT")
+    isub.required = True
+
+    p = isub.add_parser("thrust", parents=[common], help="thrust curve from a load-cell staircase or a static table",
+                        description="Fit f = K_L s + K_NL s|s| (s = u -/+ dead band, u = pwm - neutral) forward and "
+                                    "reverse. Log columns: time_s, pwm_us (staircase set-point), force_n (thrust, "
+                                    "positive forward). With --table: pwm_us, force_n (or force_kgf), or the "
+                                    "maker's T200 CSV (force in kgf).")
+    p.add_argument("file")
+    p.add_argument("--table", action="store_true", help="FILE is a static table, not a time series")
+    p.add_argument("--pair", type=int, default=1, metavar="N",
+                   help="N identical thrusters were on the rig together: divide the force by N")
+    p.add_argument("--window", type=float, default=5.0, metavar="S", help="average the last S seconds of each step (5)")
+    p.add_argument("--cutoff", type=float, default=1.0, metavar="HZ", help="Butterworth cut-off frequency (1 Hz)")
+    dead = p.add_mutually_exclusive_group()
+    dead.add_argument("--deadband", type=float, default=25.0, metavar="US", help="fixed dead band (25 us)")
+    dead.add_argument("--fit-deadband", action="store_true", help="fit the dead band too")
+    p.add_argument("--neutral", type=float, default=1500.0, metavar="US", help="neutral PWM (1500 us)")
+    p.add_argument("--range", type=float, nargs=2, metavar=("LO", "HI"), help="use only points with LO <= pwm <= HI")
+    p.add_argument("--max-force", type=float, metavar="N", help="drop points with |thrust| above N newtons")
+    p.add_argument("--thruster", metavar="NAME[,NAME]", help="thruster(s) to update (required with --update)")
+    p.set_defaults(func=_cmd_thrust)
+
+    p = isub.add_parser("towing", parents=[common], help="surge/sway/heave damping from towing-carriage runs",
+                        description="Columns: run, time_s, speed_mps, force_n (force the rig applies to the vehicle "
+                                    "along the DOF's positive axis). " + SIGN_NOTE)
+    p.add_argument("file")
+    p.add_argument("--rig", metavar="FILE", help="rig-only runs (same columns) whose drag is subtracted")
+    p.add_argument("--terms", default="linear,quadratic,cubic", help="terms to fit (default linear,quadratic,cubic)")
+    p.add_argument("--dof", choices=("surge", "sway", "heave"), default="surge", help="DOF towed (for --update)")
+    p.add_argument("--min-steady", type=float, default=2.0, metavar="S", help="shortest usable steady window (2 s)")
+    p.add_argument("--trim", type=float, default=1.0, metavar="S", help="seconds cut from each end of a window (1)")
+    p.add_argument("--no-tare", action="store_true", help="do not subtract the force at rest around each run")
+    p.set_defaults(func=_cmd_towing)
+
+    p = isub.add_parser("yaw", parents=[common], help="yaw damping from constant-moment runs",
+                        description="Columns: run, time_s, moment_nm, heading_rad (wrapped or not). " + SIGN_NOTE)
+    p.add_argument("file")
+    p.add_argument("--terms", default="linear,quadratic", help="terms to fit (default linear,quadratic)")
+    p.add_argument("--min-steady", type=float, default=2.0, metavar="S", help="shortest usable steady window (2 s)")
+    p.set_defaults(func=_cmd_yaw)
+
+    p = isub.add_parser("step", parents=[common], help="added mass and linear damping from a step/relay response",
+                        description="Output-error fit of u(s)/tau(s) = k/(s + a). Columns: time_s, force_n, "
+                                    "position_m (or time_s, moment_nm, heading_rad for yaw). Reports gain k, pole a, "
+                                    "added_mass = m - 1/k and linear_damping = -a/k, both SNAME-signed (negative).")
+    p.add_argument("file")
+    p.add_argument("--mass", type=float, required=True, metavar="KG",
+                   help="rigid-body mass m (I_zz in kg m^2 for yaw)")
+    p.add_argument("--dof", choices=("surge", "sway", "heave", "yaw"), default="surge", help="DOF (for --update)")
+    p.add_argument("--fit-bias", action="store_true",
+                   help="fit a constant unlogged force (net buoyancy in heave, tether pull)")
+    p.add_argument("--added-mass-only", action="store_true",
+                   help="with --update, write only the added mass (keep the file's damping, e.g. from towing)")
+    p.set_defaults(func=_cmd_step)
+
+    p = isub.add_parser("noise", parents=[common], help="sensor variances (filter R) from a resting log",
+                        description="Columns: time_s and one per channel. For --update, name channel columns "
+                                    "<sensor>.<channel> (pressure.z) or <channel>_<sensor> (z_pressure), with the "
+                                    "sensor names of the vehicle file's [[sensors]].")
+    p.add_argument("file")
+    p.add_argument("--detrend", type=int, default=1, choices=(0, 1, 2, 3),
+                   help="degree of the drift polynomial removed (1: linear)")
+    p.add_argument("--allan", action="store_true", help="also compute the Allan deviation")
+    p.set_defaults(func=_cmd_noise)
+
+    am = sub.add_parser("added-mass", help="added mass from box geometry (DNV-RP-H103, SPEC 9.4)",
+                        description="Eidsvik's empirical method on DNV-RP-H103 tables. Give the six dimensions "
+                                    "or --vehicle to use its [geometry]. " + SIGN_NOTE)
+    for name, unit in (("length", "M"), ("width", "M"), ("height", "M"), ("area-front", "M2"), ("area-side", "M2"),
+                       ("area-top", "M2")):
+        am.add_argument(f"--{name}", type=float, metavar=unit)
+    am.add_argument("--rho", type=float, metavar="KG/M3", help="water density (1000, or the vehicle's)")
+    am.add_argument("--vehicle", metavar="NAME|FILE", help="take the geometry from this vehicle")
+    am.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+    am.add_argument("--plot", metavar="PNG", help="write the DNV tables with the points used")
+    am.add_argument("--update", metavar="VEHICLE.toml", help="write [added_mass] into this vehicle file")
+    am.set_defaults(func=_cmd_added_mass)
+
+    lab = sub.add_parser("lab", help="virtual lab: generate realistic experiment data from a vehicle file",
+                         description="Generate the data of a lab experiment from a vehicle whose true parameters are "
+                                     "known (seeded; the seed, settings and truth go into '#' comment lines).")
+    lsub = lab.add_subparsers(dest="lab_command", metavar="EXPERIMENT")
+    lsub.required = True
+    lcommon = argparse.ArgumentParser(add_help=False)
+    lcommon.add_argument("--vehicle", default="udrone", metavar="NAME|FILE", help="packaged name or TOML file (udrone)")
+    lcommon.add_argument("--seed", type=int, help="random seed (default: a fresh one, printed)")
+    lcommon.add_argument("--out", required=True, metavar="FILE", help="CSV file to write")
+    lcommon.add_argument("--json", action="store_true", help="print what was written as JSON")
+
+    p = lsub.add_parser("thrust", parents=[lcommon], help="load-cell PWM staircase")
+    p.add_argument("--thruster", metavar="NAME[,NAME]", help="thruster(s) on the rig (default: the first)")
+    p.add_argument("--pwm-start", type=float, default=1300.0)
+    p.add_argument("--pwm-stop", type=float, default=1700.0)
+    p.add_argument("--pwm-step", type=float, default=10.0)
+    p.add_argument("--step-s", type=float, default=30.0, help="seconds per step (30)")
+    p.add_argument("--rate-hz", type=float, default=50.0)
+    p.add_argument("--noise-n", type=float, default=0.3, help="load-cell white noise std [N]")
+    p.set_defaults(func=_cmd_lab_thrust)
+
+    p = lsub.add_parser("towing", parents=[lcommon], help="towing-carriage runs and rig-only runs")
+    p.add_argument("--dof", choices=("surge", "sway", "heave"), default="surge")
+    p.add_argument("--speeds", help="comma-separated speeds [m/s] (default +-0.1..0.5)")
+    p.add_argument("--hold-s", type=float, default=15.0, help="seconds at constant speed (15)")
+    p.add_argument("--noise-n", type=float, default=0.15, help="load-cell white noise std [N]")
+    p.add_argument("--rig-out", metavar="FILE", help="rig-only runs (default: <out stem>-rig.csv)")
+    p.set_defaults(func=_cmd_lab_towing)
+
+    p = lsub.add_parser("yaw", parents=[lcommon], help="constant-moment yaw runs")
+    p.add_argument("--moments", help="comma-separated moments [N m] (default 0.25,0.5,0.75,1,2)")
+    p.add_argument("--duration-s", type=float, default=30.0)
+    p.add_argument("--moment-error", type=float, default=0.0,
+                   help="relative std of the applied moment per run (allocation error; 0)")
+    p.set_defaults(func=_cmd_lab_yaw)
+
+    p = lsub.add_parser("step", parents=[lcommon], help="relay test observed by motion capture")
+    p.add_argument("--dof", choices=("surge", "sway", "heave", "yaw"), default="surge")
+    p.add_argument("--force", type=float, default=2.0, help="relay force [N] (moment [N m] for yaw)")
+    p.add_argument("--amplitude", type=float, default=0.3, help="switching position [m] (rad for yaw)")
+    p.add_argument("--duration-s", type=float, default=60.0)
+    p.add_argument("--linear", action="store_true", help="linear damping only in the truth")
+    p.add_argument("--buoyancy-error", type=float, default=1.0, metavar="N",
+                   help="heave: how much more buoyant than the file the vehicle is (1 N)")
+    p.set_defaults(func=_cmd_lab_step)
+
+    p = lsub.add_parser("noise", parents=[lcommon], help="resting sensor log")
+    p.add_argument("--samples", type=int, default=6796, help="samples (6796 as in the thesis)")
+    p.add_argument("--rate-hz", type=float)
+    p.set_defaults(func=_cmd_lab_noise)
+
+
+# --------------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------------
+
+def _user_error(msg: str) -> Exception:
+    from rovlab.interfaces.cli import UserError
+
+    return UserError(msg)
+
+
+def _run(file: str, fn: Callable[[], Any]) -> Any:
+    """Call an identification, turning its IdentificationError into a clean user error."""
+    from rovlab.ident.fitting import IdentificationError
+
+    try:
+        return fn()
+    except IdentificationError as exc:
+        raise _user_error(f"{file}: {exc}") from None
+
+
+def _clean(x: Any) -> Any:
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if hasattr(x, "tolist"):
+        return _clean(x.tolist())
+    return x
+
+
+def _emit(args: argparse.Namespace, data: dict[str, Any], text: str) -> None:
+    if args.json:
+        json.dump(_clean(data), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        print(text)
+
+
+def _plot(args: argparse.Namespace, tool: str, draw: Callable[[Path], Any]) -> str | None:
+    """Write the figure (default next to the input file); a missing matplotlib only warns."""
+    from rovlab.ident.plots import PlotUnavailable
+
+    if getattr(args, "no_plot", False):
+        return None
+    if args.plot:
+        path = Path(args.plot)
+    elif getattr(args, "file", None):
+        src = Path(args.file)
+        path = src.with_name(f"{src.stem}-{tool}.png")
+    else:
+        return None
+    try:
+        draw(path)
+    except PlotUnavailable as exc:
+        print(f"rovlab: note: no figure written: {exc}", file=sys.stderr)
+        return None
+    except OSError as exc:
+        raise _user_error(f"cannot write the figure {path}: {exc.strerror or exc}") from None
+    return str(path)
+
+
+def _check_update_target(path: str) -> Path:
+    from rovlab.params.vehicle import packaged_vehicle_names, packaged_vehicle_path
+
+    p = Path(path)
+    if not p.exists():
+        if path in packaged_vehicle_names():
+            raise _user_error(f"--update needs a vehicle file, not the packaged name {path!r}; copy it first: "
+                              f"cp {packaged_vehicle_path(path)} my_{path}.toml")
+        raise _user_error(f"--update: no such file {path}")
+    pkg = packaged_vehicle_path("x").parent.resolve()
+    if p.resolve().parent == pkg:
+        raise _user_error(f"--update: {path} is a packaged vehicle file; copy it and update the copy")
+    return p
+
+
+def _update(args: argparse.Namespace, edits: dict[str, Any], blocks: list[str], what: str) -> str | None:
+    if not args.update:
+        return None
+    from rovlab.params.edit import edit_vehicle_file
+
+    target = _check_update_target(args.update)
+    note = f"{what} ({_dt.date.today().isoformat()})"
+    edit_vehicle_file(target, edits, sources={b: note for b in blocks})
+    print(f"updated {target}: " + ", ".join(k for k, v in edits.items() if not _is_delete(v))
+          + f"; source note: {note}", file=sys.stderr)
+    return str(target)
+
+
+def _is_delete(v: Any) -> bool:
+    from rovlab.params.edit import DELETE
+
+    return v is DELETE
+
+
+def _pm(x: float, se: float) -> str:
+    if se is None or not math.isfinite(se) or se == 0:
+        return f"{x:.5g}"
+    return f"{x:.5g} ± {se:.2g}"
+
+
+def _terms(text: str) -> list[str]:
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+def _floats(text: str | None, what: str) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise _user_error(f"{what}: expected comma-separated numbers, got {text!r}") from None
+
+
+# --------------------------------------------------------------------------------------------
+# identify
+# --------------------------------------------------------------------------------------------
+
+def _cmd_thrust(args: argparse.Namespace) -> int:
+    from rovlab.ident import plots, thrust
+
+    if args.update and not args.thruster:
+        raise _user_error("--update needs --thruster NAME (or NAME,NAME for a pair) to say which [[thrusters]] entry")
+    if args.pair < 1:
+        raise _user_error(f"--pair must be at least 1, got {args.pair}")
+    dead = None if args.fit_deadband else args.deadband
+    rng = tuple(args.range) if args.range else None
+    if args.table:
+        pwm, force, fmt = thrust.read_thrust_table(args.file)
+        fit = _run(args.file, lambda: thrust.fit_thrust_curve(
+            pwm, force / args.pair, neutral_us=args.neutral, deadband_us=dead, pwm_range=rng,
+            max_force_n=args.max_force, pair=args.pair))
+        source = f"static table ({fmt})"
+    else:
+        log = thrust.read_thrust_log(args.file)
+        fit = _run(args.file, lambda: thrust.fit_thrust_log(
+            log["time_s"], log["pwm_us"], log["force_n"], pair=args.pair, window_s=args.window, cutoff_hz=args.cutoff,
+            neutral_us=args.neutral, deadband_us=dead, pwm_range=rng, max_force_n=args.max_force))
+        source = f"load-cell staircase, {fit.pwm_us.size} steps"
+    png = _plot(args, "thrust", lambda p: plots.plot_thrust(fit, p, title=f"Thrust: {Path(args.file).name}"))
+    updated = None
+    if args.update:
+        names = [n.strip() for n in args.thruster.split(",") if n.strip()]
+        updated = _update(args, thrust.thrust_edits(fit, names), [f"thrusters[name={n}]" for n in names],
+                          f"curve: rovlab identify thrust {Path(args.file).name}"
+                          + (f" --pair {args.pair}" if args.pair > 1 else ""))
+    data = fit.as_dict() | {"file": args.file, "source": source, "plot": png, "updated": updated}
+    se = fit.stderr
+    skipped = fit.steps.skipped_us if fit.steps is not None else ()
+    text = "\n".join([
+        f"thrust curve from {args.file} ({source}" + (f", force / {args.pair}" if args.pair > 1 else "") + ")",
+        f"  forward  K_L_pos  = {_pm(fit.K_L_pos, se['K_L_pos'])} N/us    K_NL_pos = {_pm(fit.K_NL_pos, se['K_NL_pos'])} N/us^2",
+        f"  reverse  K_L_neg  = {_pm(fit.K_L_neg, se['K_L_neg'])} N/us    K_NL_neg = {_pm(fit.K_NL_neg, se['K_NL_neg'])} N/us^2",
+        f"  dead band {_pm(fit.deadband_us, se['deadband_us'])} us ({'fitted' if fit.deadband_fitted else 'fixed'}), "
+        f"neutral {fit.neutral_us:g} us",
+        f"  RMS residual {fit.rms_n:.4g} N over {fit.pwm_us.size} points ({fit.n_pos} forward, {fit.n_neg} reverse)",
+    ] + ([f"  skipped {len(skipped)} step(s) shorter than the {args.window:g} s window"] if skipped else [])
+      + ([f"  figure: {png}"] if png else []))
+    _emit(args, data, text)
+    return 0
+
+
+def _damping_text(fit, file: str, label: str) -> str:
+    lines = [f"{label} from {file}: {len(fit.points)} runs" + (f", {len(fit.rig_points)} rig-only runs subtracted"
+                                                               if fit.rig_points else "")]
+    unit = "N m s/rad" if fit.dof == "yaw" else "N s/m"
+    units = {"linear": unit, "quadratic": unit.replace(" s", " s^2").replace("/rad", "/rad^2").replace("/m", "/m^2"),
+             "cubic": unit.replace(" s", " s^3").replace("/rad", "/rad^3").replace("/m", "/m^3")}
+    for t in fit.terms:
+        lines.append(f"  {t:9s} = {_pm(getattr(fit, t), fit.stderr[t])} {units[t]}")
+    lines.append(f"  RMS residual {fit.rms:.4g} {fit.unit}")
+    lines.append("  run   speed      force       window")
+    for p in fit.points:
+        lines.append(f"  {p.run:<4d} {p.speed:+.4f}  {p.force:+9.4f}   {p.start_s:7.2f}-{p.end_s:.2f} s")
+    return "\n".join(lines)
+
+
+def _cmd_towing(args: argparse.Namespace) -> int:
+    from rovlab.ident import plots, towing
+
+    table = towing.read_towing(args.file)
+    rig = towing.read_towing(args.rig) if args.rig else None
+    fit = _run(args.file, lambda: towing.identify_towing(table, rig, terms=_terms(args.terms), dof=args.dof,
+                                                         min_s=args.min_steady, trim_s=args.trim,
+                                                         tare=not args.no_tare))
+    png = _plot(args, "towing", lambda p: plots.plot_damping(fit, p, title=f"{args.dof} damping: {Path(args.file).name}"))
+    updated = _update(args, towing.damping_edits(fit, args.dof), ["damping"],
+                      f"{args.dof}: rovlab identify towing {Path(args.file).name}"
+                      + (f" --rig {Path(args.rig).name}" if args.rig else "") + f" (terms {','.join(fit.terms)})")
+    data = fit.as_dict() | {"file": args.file, "rig_file": args.rig, "plot": png, "updated": updated}
+    text = _damping_text(fit, args.file, f"{args.dof} damping (SNAME)") + (f"\n  figure: {png}" if png else "")
+    _emit(args, data, text)
+    return 0
+
+
+def _cmd_yaw(args: argparse.Namespace) -> int:
+    from rovlab.ident import plots, towing, yaw
+
+    table = yaw.read_yaw(args.file)
+    fit = _run(args.file, lambda: yaw.identify_yaw(table, terms=_terms(args.terms), min_s=args.min_steady))
+    png = _plot(args, "yaw", lambda p: plots.plot_damping(fit, p, title=f"yaw damping: {Path(args.file).name}"))
+    updated = _update(args, towing.damping_edits(fit, "yaw"), ["damping"],
+                      f"yaw: rovlab identify yaw {Path(args.file).name} (terms {','.join(fit.terms)})")
+    d = fit.as_dict()
+    data = {"linear": d["linear"], "quadratic": d["quadratic"]} | d | {"file": args.file, "plot": png,
+                                                                      "updated": updated}
+    text = _damping_text(fit, args.file, "yaw damping (SNAME)") + (f"\n  figure: {png}" if png else "")
+    _emit(args, data, text)
+    return 0
+
+
+def _cmd_step(args: argparse.Namespace) -> int:
+    from rovlab.ident import plots, step
+
+    table, t, f, x = step.read_step(args.file)
+    fit = _run(args.file, lambda: step.fit_step_response(t, f, x, mass=args.mass, bias=args.fit_bias))
+    yaw = args.dof == "yaw" or table.has("heading_rad")
+    png = _plot(args, "step", lambda p: plots.plot_step(
+        fit, p, title=f"Relay/step response ({args.dof}): {Path(args.file).name}",
+        position_unit="rad" if yaw else "m", force_unit="N m" if yaw else "N"))
+    edits = step.step_edits(fit, args.dof)
+    if args.added_mass_only:
+        edits = {k: v for k, v in edits.items() if k.startswith("added_mass.")}
+    elif args.update:
+        from rovlab.params.vehicle import DOF4, load_vehicle
+
+        i = DOF4.index(args.dof)
+        current = load_vehicle(_check_update_target(args.update))
+        if current.damping_quadratic[i] != 0 or current.damping_cubic[i] != 0:
+            print(f"rovlab: note: {args.update} also has quadratic/cubic {args.dof} damping; the step test's linear "
+                  "damping is an equivalent linearisation that already contains them (use --added-mass-only to "
+                  "keep the file's damping)", file=sys.stderr)
+    updated = _update(args, edits, ["added_mass"] + (["damping"] if len(edits) > 1 else []),
+                      f"{args.dof}: rovlab identify step {Path(args.file).name} --mass {args.mass:g}")
+    data = fit.as_dict() | {"file": args.file, "dof": args.dof, "plot": png, "updated": updated}
+    se = fit.stderr
+    key, _ = step.DOF_KEYS[args.dof]
+    text = "\n".join([
+        f"first-order model u(s)/tau(s) = k/(s + a) from {args.file} ({fit.time_s.size} samples, output error)",
+        f"  gain k = {_pm(fit.gain, se['gain'])}   pole a = {_pm(fit.pole, se['pole'])} 1/s",
+        f"  with m = {args.mass:g}: added mass {key} = m - 1/k = {_pm(fit.added_mass, se['added_mass'])} (SNAME)",
+        f"  linear damping = -a/k = {_pm(fit.linear_damping, se['linear_damping'])} (SNAME)",
+    ] + ([f"  force bias = {_pm(fit.bias, se['bias'])}"] if fit.bias_fitted else []) + [
+        f"  fit {fit.fit_percent:.2f} %, RMS position residual {fit.rms:.3g}",
+        "  note: a linear model; nonlinear damping makes these an equivalent linearisation at the test's speeds",
+    ] + ([f"  figure: {png}"] if png else []))
+    _emit(args, data, text)
+    return 0
+
+
+def _cmd_noise(args: argparse.Namespace) -> int:
+    from rovlab.ident import noise, plots
+
+    table, cols = noise.read_noise(args.file)
+    est = _run(args.file, lambda: noise.noise_variances(table["time_s"], cols, detrend=args.detrend, allan=args.allan))
+    png = _plot(args, "noise", lambda p: plots.plot_noise(est, p, title=f"Resting log {Path(args.file).name}: "
+                                                                        f"drift (degree {args.detrend}) removed"))
+    updated = None
+    if args.update:
+        from rovlab.params.vehicle import load_vehicle
+
+        target = _check_update_target(args.update)
+        edits = _run(args.file, lambda: noise.noise_edits(est, load_vehicle(target)))
+        sensors = sorted({k.split("]")[0] + "]" for k in edits})
+        updated = _update(args, edits, sensors, f"variance: rovlab identify noise {Path(args.file).name} "
+                                                f"({est.time_s.size} samples, drift degree {args.detrend})")
+    data = est.as_dict() | {"file": args.file, "plot": png, "updated": updated}
+    lines = [f"measurement variances (R diagonal) from {args.file}: {est.time_s.size} samples at {est.rate_hz:.4g} Hz, "
+             f"drift of degree {args.detrend} removed",
+             f"  {'column':18s} {'variance':>12s} {'std':>11s}   95 % interval"]
+    for k, c in est.channels.items():
+        lines.append(f"  {k:18s} {c.variance:12.5g} {c.std:11.4g}   {c.ci95[0]:.4g} .. {c.ci95[1]:.4g}")
+    if png:
+        lines.append(f"  figure: {png}")
+    _emit(args, data, "\n".join(lines))
+    return 0
+
+
+def _cmd_added_mass(args: argparse.Namespace) -> int:
+    from rovlab.ident import added_mass, plots
+
+    dims = {k: getattr(args, k) for k in ("length", "width", "height", "area_front", "area_side", "area_top")}
+    if args.vehicle:
+        from rovlab.params.vehicle import load_vehicle
+
+        v = load_vehicle(args.vehicle)
+        if v.geometry is None:
+            raise _user_error(f"vehicle {v.name!r} has no [geometry] block; give --length ... --area-top instead")
+        g = v.geometry
+        base = {"length": g.length, "width": g.width, "height": g.height, "area_front": g.area_front,
+                "area_side": g.area_side, "area_top": g.area_top}
+        dims = {k: (dims[k] if dims[k] is not None else base[k]) for k in dims}
+        rho = args.rho if args.rho is not None else v.water_density
+    else:
+        missing = ["--" + k.replace("_", "-") for k, x in dims.items() if x is None]
+        if missing:
+            raise _user_error("added-mass needs " + ", ".join(missing) + " (or --vehicle NAME to use its geometry)")
+        rho = args.rho if args.rho is not None else 1000.0
+    est = _run("added-mass", lambda: added_mass.added_mass_dnv(**dims, rho=rho))  # type: ignore[arg-type]
+    png = None
+    if args.plot:
+        png = _plot(args, "added-mass", lambda p: plots.plot_added_mass(est, p))
+    updated = _update(args, added_mass.added_mass_edits(est), ["added_mass"],
+                      "rovlab added-mass: Eidsvik/DNV-RP-H103 from L, W, H = "
+                      f"{dims['length']:g}, {dims['width']:g}, {dims['height']:g} m")
+    data = est.as_dict() | {"inputs": dims | {"rho": rho}, "plot": png, "updated": updated}
+    lines = ["added mass (SNAME; Eidsvik's method on DNV-RP-H103 tables, SPEC 9.4)",
+             f"  X_udot = {est.X_udot:9.4f} kg", f"  Y_vdot = {est.Y_vdot:9.4f} kg",
+             f"  Z_wdot = {est.Z_wdot:9.4f} kg", f"  N_rdot = {est.N_rdot:9.4f} kg m^2",
+             f"  lambda = {est.scale:.4f}; c_xy = {est.c_xy:.4f}, c_yz = {est.c_yz:.4f}, c_xz = {est.c_xz:.4f}",
+             f"  cross-section W vs H differ by {100 * est.cross_section_mismatch:.0f} % "
+             "(the method assumes about 10 % or less)"]
+    lines += [f"  extrapolated: {e}" for e in est.extrapolated]
+    if png:
+        lines.append(f"  figure: {png}")
+    _emit(args, data, "\n".join(lines))
+    return 0
+
+
+# --------------------------------------------------------------------------------------------
+# lab
+# --------------------------------------------------------------------------------------------
+
+def _lab_vehicle(args: argparse.Namespace):
+    from rovlab.params.vehicle import load_vehicle
+
+    return load_vehicle(args.vehicle)
+
+
+def _lab_call(fn: Callable[[], Any]) -> Any:
+    try:
+        return fn()
+    except (ValueError, KeyError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        raise _user_error(str(msg)) from None
+
+
+def _lab_report(args: argparse.Namespace, written: list[tuple[str, Any]], nxt: str) -> int:
+    from rovlab.ident.lab import write_lab_data
+
+    out = []
+    for path, data in written:
+        try:
+            write_lab_data(path, data)
+        except OSError as exc:
+            raise _user_error(f"cannot write {path}: {exc.strerror or exc}") from None
+        rows = len(next(iter(data.columns.values())))
+        out.append({"file": path, "rows": rows, "experiment": data.experiment, "seed": data.seed,
+                    "vehicle": data.vehicle, "truth": dict(data.truth), "notes": list(data.notes)})
+    if args.json:
+        json.dump(_clean({"written": out, "seed": written[0][1].seed, "next": nxt}), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    for o in out:
+        print(f"wrote {o['file']}: {o['experiment']}, {o['rows']} rows, vehicle {o['vehicle']}, seed {o['seed']}")
+        if o["truth"]:
+            print("  truth: " + ", ".join(f"{k} = {v:.6g}" for k, v in o["truth"].items()))
+        for n in o["notes"]:
+            print(f"  note: {n}")
+    print(f"next: {nxt}")
+    return 0
+
+
+def _cmd_lab_thrust(args: argparse.Namespace) -> int:
+    from rovlab.ident import lab
+
+    v = _lab_vehicle(args)
+    names = [n.strip() for n in args.thruster.split(",")] if args.thruster else None
+    data = _lab_call(lambda: lab.thrust_rig(v, names, seed=args.seed, pwm_start=args.pwm_start, pwm_stop=args.pwm_stop,
+                                            pwm_step=args.pwm_step, step_s=args.step_s, rate_hz=args.rate_hz,
+                                            noise_std_n=args.noise_n))
+    n = len(names) if names else 1
+    window = min(5.0, 0.5 * args.step_s)
+    nxt = (f"rovlab identify thrust {args.out}" + (f" --pair {n}" if n > 1 else "")
+           + (f" --window {window:g}" if window != 5.0 else ""))
+    return _lab_report(args, [(args.out, data)], nxt)
+
+
+def _cmd_lab_towing(args: argparse.Namespace) -> int:
+    from rovlab.ident import lab
+
+    v = _lab_vehicle(args)
+    speeds = _floats(args.speeds, "--speeds") or lab.DEFAULT_SPEEDS
+    veh, rig = _lab_call(lambda: lab.towing_runs(v, args.dof, seed=args.seed, speeds=speeds, hold_s=args.hold_s,
+                                                 noise_std_n=args.noise_n))
+    out = Path(args.out)
+    rig_out = args.rig_out or str(out.with_name(f"{out.stem}-rig{out.suffix or '.csv'}"))
+    nxt = f"rovlab identify towing {args.out} --rig {rig_out} --dof {args.dof}"
+    return _lab_report(args, [(args.out, veh), (rig_out, rig)], nxt)
+
+
+def _cmd_lab_yaw(args: argparse.Namespace) -> int:
+    from rovlab.ident import lab
+
+    v = _lab_vehicle(args)
+    moments = _floats(args.moments, "--moments") or lab.DEFAULT_MOMENTS
+    data = _lab_call(lambda: lab.yaw_runs(v, seed=args.seed, moments=moments, duration_s=args.duration_s,
+                                          moment_error=args.moment_error))
+    return _lab_report(args, [(args.out, data)], f"rovlab identify yaw {args.out}")
+
+
+def _cmd_lab_step(args: argparse.Namespace) -> int:
+    from rovlab.ident import lab
+
+    v = _lab_vehicle(args)
+    data = _lab_call(lambda: lab.relay_test(v, args.dof, seed=args.seed, force=args.force, amplitude=args.amplitude,
+                                            duration_s=args.duration_s, linear=args.linear,
+                                            buoyancy_error_n=args.buoyancy_error))
+    nxt = (f"rovlab identify step {args.out} --mass {data.truth['mass']:g} --dof {args.dof}"
+           + (" --fit-bias" if args.dof == "heave" else ""))
+    return _lab_report(args, [(args.out, data)], nxt)
+
+
+def _cmd_lab_noise(args: argparse.Namespace) -> int:
+    from rovlab.ident import lab
+
+    v = _lab_vehicle(args)
+    data = _lab_call(lambda: lab.resting_log(v, seed=args.seed, samples=args.samples, rate_hz=args.rate_hz))
+    return _lab_report(args, [(args.out, data)], f"rovlab identify noise {args.out}")

@@ -1,0 +1,220 @@
+"""Command-line contract of issue 5: ``rovlab lab ...`` -> ``rovlab identify ... --json`` round trips,
+``added-mass``, ``--update`` into a vehicle file, and clean errors (exit status 2, no traceback)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from rovlab.interfaces.cli import main
+from rovlab.params import load_vehicle
+from rovlab.params.vehicle import packaged_vehicle_path
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def run_json(capsys, *argv):
+    code, out, err = run(capsys, *argv, "--json")
+    assert code == 0, err
+    return json.loads(out)
+
+
+@pytest.fixture
+def vehicle_copy(tmp_path):
+    path = tmp_path / "my_udrone.toml"
+    path.write_text(packaged_vehicle_path("udrone").read_text(encoding="utf-8"), encoding="utf-8")
+    return path
+
+
+def test_thrust_round_trip_and_update(capsys, tmp_path, vehicle_copy):
+    log = tmp_path / "t4t5.csv"
+    made = run_json(capsys, "lab", "thrust", "--thruster", "T4,T5", "--seed", 3, "--step-s", 8, "--out", log)
+    assert made["seed"] == 3 and "--pair 2" in made["next"]
+    data = run_json(capsys, "identify", "thrust", log, "--pair", 2, "--window", 3, "--no-plot",
+                    "--update", vehicle_copy, "--thruster", "T4,T5")
+    assert set(data) >= {"K_L_pos", "K_NL_pos", "K_L_neg", "K_NL_neg", "deadband_us", "rms_n"}
+    # SPEC 2, T4/T5: K_L+ 7.22e-2, K_NL+ 2.41e-4, K_L- 3.57e-2, K_NL- 1.75e-4
+    for key, truth in (("K_L_pos", 7.22e-2), ("K_NL_pos", 2.41e-4), ("K_L_neg", 3.57e-2), ("K_NL_neg", 1.75e-4)):
+        assert data[key] == pytest.approx(truth, rel=0.03), key
+    v = load_vehicle(vehicle_copy)
+    assert v.thruster("T5").curve.K_L_pos == pytest.approx(data["K_L_pos"], rel=1e-3)
+    assert "curve: rovlab identify thrust t4t5.csv --pair 2" in v.thruster("T4").source
+
+
+def test_thrust_table_of_the_maker(capsys, tmp_path):
+    from importlib import resources
+
+    src = resources.files("rovlab.models") / "data" / "t200" / "T200-Thrusters-16V.csv"
+    data = run_json(capsys, "identify", "thrust", str(src), "--table", "--plot", tmp_path / "t200.png")
+    assert 0.1 < data["rms_n"] < 0.6 and data["points"] == 201
+    assert (tmp_path / "t200.png").stat().st_size > 10_000
+
+
+def test_towing_round_trip_writes_plot_next_to_the_data(capsys, tmp_path, vehicle_copy):
+    runs = tmp_path / "heave.csv"
+    made = run_json(capsys, "lab", "towing", "--dof", "heave", "--seed", 5, "--out", runs)
+    rig = tmp_path / "heave-rig.csv"
+    assert made["written"][1]["file"] == str(rig)
+    data = run_json(capsys, "identify", "towing", runs, "--rig", rig, "--dof", "heave", "--update", vehicle_copy)
+    assert set(data) >= {"linear", "quadratic", "cubic"}
+    for key, truth in (("linear", -5.18), ("quadratic", -36.99), ("cubic", -123.15)):  # SPEC 2, heave
+        assert abs(data[key] - truth) < 3.5 * data["stderr"][key]
+    assert data["plot"] == str(tmp_path / "heave-towing.png") and (tmp_path / "heave-towing.png").exists()
+    v = load_vehicle(vehicle_copy)
+    assert v.damping_linear[2] == pytest.approx(data["linear"], rel=1e-3)
+    assert "heave: rovlab identify towing heave.csv --rig heave-rig.csv" in v.sources["damping"]
+
+
+def test_yaw_round_trip(capsys, tmp_path):
+    runs = tmp_path / "yaw.csv"
+    run_json(capsys, "lab", "yaw", "--seed", 6, "--duration-s", 15, "--out", runs)
+    data = run_json(capsys, "identify", "yaw", runs, "--no-plot")
+    assert data["linear"] == pytest.approx(-0.07, rel=0.05)  # SPEC 2: N_r
+    assert data["quadratic"] == pytest.approx(-1.55, rel=0.05)  # N_|r|r
+
+
+def test_step_round_trip_and_update(capsys, tmp_path, vehicle_copy):
+    log = tmp_path / "relay.csv"
+    made = run_json(capsys, "lab", "step", "--seed", 7, "--linear", "--out", log)
+    assert "--mass 7.31" in made["next"]
+    data = run_json(capsys, "identify", "step", log, "--mass", 7.31, "--no-plot", "--update", vehicle_copy)
+    assert set(data) >= {"gain", "pole", "added_mass", "linear_damping"}
+    assert data["added_mass"] == pytest.approx(-5.50, rel=0.05)  # SNAME sign, SPEC 2
+    assert data["linear_damping"] == pytest.approx(-4.03, rel=0.05)
+    assert data["gain"] == pytest.approx(1 / (7.31 + 5.50), rel=0.05)
+    v = load_vehicle(vehicle_copy)
+    assert v.added_mass[0] == pytest.approx(data["added_mass"], rel=1e-3)
+
+
+def test_noise_round_trip_and_update(capsys, tmp_path, vehicle_copy):
+    log = tmp_path / "rest.csv"
+    run_json(capsys, "lab", "noise", "--seed", 8, "--out", log)
+    data = run_json(capsys, "identify", "noise", log, "--no-plot", "--allan", "--update", vehicle_copy)
+    assert data["variance"]["z_pressure"] == pytest.approx(1.189622e-04, rel=0.05)  # thesis table 4.8
+    assert "allan" in data
+    v = load_vehicle(vehicle_copy)
+    assert v.sensor("qualisys").variance["psi"] == pytest.approx(data["variance"]["psi_qualisys"], rel=1e-3)
+    assert "variance: rovlab identify noise rest.csv" in v.sensor("pressure").source
+
+
+def test_added_mass_contract(capsys, tmp_path):
+    data = run_json(capsys, "added-mass", "--length", 0.482, "--width", 0.333, "--height", 0.287,
+                    "--area-front", 0.055915, "--area-side", 0.102378, "--area-top", 0.117375)
+    # thesis table 4.4 / SPEC 9.4
+    assert data["X_udot"] == pytest.approx(-5.50, abs=0.01)
+    assert data["Y_vdot"] == pytest.approx(-12.70, abs=0.01)
+    assert data["Z_wdot"] == pytest.approx(-14.57, abs=0.01)
+    assert data["N_rdot"] == pytest.approx(-0.12, abs=0.01)
+    code, out, _ = run(capsys, "added-mass", "--vehicle", "udrone", "--plot", tmp_path / "am.png")
+    assert code == 0 and "X_udot =   -5.4969 kg" in out and (tmp_path / "am.png").exists()
+
+
+def test_human_readable_output(capsys, tmp_path):
+    log = tmp_path / "relay.csv"
+    code, out, _ = run(capsys, "lab", "step", "--seed", 9, "--out", log)
+    assert code == 0 and "seed 9" in out and "next: rovlab identify step" in out
+    code, out, _ = run(capsys, "identify", "step", log, "--mass", 7.31, "--no-plot")
+    assert code == 0 and "added mass X_udot = m - 1/k" in out and "(SNAME)" in out
+
+
+# -- errors ----------------------------------------------------------------------------------
+
+def test_malformed_file_is_a_clean_error(capsys, tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,pwm_us,force_n\n0,1500,0\n0.02,1500,oops\n", encoding="utf-8")
+    code, out, err = run(capsys, "identify", "thrust", bad)
+    assert code == 2 and out == ""
+    assert "bad.csv: line 3, column 'force_n': got 'oops'; expected a number" in err
+    assert "Traceback" not in err
+
+
+def test_missing_columns_and_too_little_data(capsys, tmp_path):
+    bad = tmp_path / "runs.csv"
+    bad.write_text("run,time_s,speed,force_n\n1,0,0,0\n", encoding="utf-8")
+    code, _, err = run(capsys, "identify", "towing", bad)
+    assert code == 2 and "missing: speed_mps" in err
+    few = tmp_path / "few.csv"
+    run(capsys, "lab", "towing", "--speeds", "0.1,0.2,0.3", "--seed", 1, "--out", few)
+    code, _, err = run(capsys, "identify", "towing", few, "--no-plot")
+    assert code == 2 and "needs at least 4 runs" in err and str(few) in err
+
+
+def test_update_needs_a_thruster_and_a_real_file(capsys, tmp_path):
+    log = tmp_path / "t.csv"
+    run(capsys, "lab", "thrust", "--seed", 1, "--step-s", 6, "--out", log)
+    code, _, err = run(capsys, "identify", "thrust", log, "--window", 3, "--update", "x.toml")
+    assert code == 2 and "--update needs --thruster" in err
+    code, _, err = run(capsys, "identify", "thrust", log, "--window", 3, "--no-plot", "--update", "udrone",
+                       "--thruster", "T1")
+    assert code == 2 and "copy it first" in err
+    code, _, err = run(capsys, "identify", "thrust", log, "--window", 3, "--no-plot", "--update",
+                       packaged_vehicle_path("udrone"), "--thruster", "T1")
+    assert code == 2 and "packaged vehicle file" in err
+
+
+def test_update_that_would_break_the_file_writes_nothing(capsys, tmp_path, vehicle_copy):
+    # towing data with the force sign flipped gives positive ("energy-creating") damping, which
+    # the vehicle file refuses: the update must fail and leave the file as it was
+    from rovlab.io.tables import read_table, write_table
+
+    runs = tmp_path / "surge.csv"
+    run(capsys, "lab", "towing", "--seed", 4, "--out", runs)
+    t = read_table(runs)
+    flipped = tmp_path / "flipped.csv"
+    write_table(flipped, {c: (-t[c] if c == "force_n" else t[c]) for c in t.columns}, formats={"run": "d"})
+    before = vehicle_copy.read_text(encoding="utf-8")
+    code, _, err = run(capsys, "identify", "towing", flipped, "--no-plot", "--update", vehicle_copy)
+    assert code == 2 and "nothing was written" in err and "damping.surge.linear" in err
+    assert vehicle_copy.read_text(encoding="utf-8") == before
+
+
+def test_thrust_of_the_wrong_sign_is_explained(capsys, tmp_path):
+    log = tmp_path / "odd.csv"
+    rows = ["time_s,pwm_us,force_n"]
+    t = 0.0
+    for pwm in range(1300, 1710, 10):
+        for _ in range(100):
+            rows.append(f"{t:.2f},{pwm},{-0.05 * (pwm - 1500)}")
+            t += 0.05
+    log.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    code, _, err = run(capsys, "identify", "thrust", log, "--no-plot")
+    assert code == 2 and "forward steps produce negative thrust" in err
+
+
+def test_lab_bad_options(capsys, tmp_path):
+    code, _, err = run(capsys, "lab", "thrust", "--thruster", "T9", "--out", tmp_path / "x.csv")
+    assert code == 2 and "has no thruster 'T9'" in err
+    code, _, err = run(capsys, "lab", "step", "--dof", "heave", "--force", "0.5", "--out", tmp_path / "x.csv")
+    assert code == 2 and "relay switched 0 time" in err
+
+
+def test_missing_matplotlib_only_warns(capsys, tmp_path, monkeypatch):
+    from rovlab.ident import plots
+
+    def unavailable(*a, **k):
+        raise plots.PlotUnavailable(plots.INSTALL_HINT)
+
+    monkeypatch.setattr(plots, "_figure", unavailable)
+    log = tmp_path / "relay.csv"
+    run(capsys, "lab", "step", "--seed", 2, "--linear", "--out", log)
+    code, out, err = run(capsys, "identify", "step", log, "--mass", 7.31, "--json")
+    assert code == 0 and json.loads(out)["plot"] is None
+    assert "pip install 'rovlab[plot]'" in err
+
+
+def test_step_update_can_keep_the_towing_damping(capsys, tmp_path, vehicle_copy):
+    log = tmp_path / "relay.csv"
+    run(capsys, "lab", "step", "--seed", 12, "--out", log)
+    code, _, err = run(capsys, "identify", "step", log, "--mass", 7.31, "--no-plot", "--update", vehicle_copy,
+                       "--added-mass-only")
+    assert code == 0 and "equivalent linearisation" not in err
+    v = load_vehicle(vehicle_copy)
+    assert v.damping_linear[0] == -4.03 and v.added_mass[0] != -5.50  # SPEC 2 X_u kept
+    code, _, err = run(capsys, "identify", "step", log, "--mass", 7.31, "--no-plot", "--update", vehicle_copy)
+    assert code == 0 and "equivalent linearisation" in err
+    assert load_vehicle(vehicle_copy).damping_linear[0] < -4.03
