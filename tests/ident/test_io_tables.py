@@ -80,3 +80,9 @@ def test_non_integer_run_and_backwards_time_are_named(tmp_path):
     t = read_table(_write(tmp_path, "time_s\n0\n0.2\n0.1\n", name="b.csv"))
     with pytest.raises(ConfigError, match="b.csv: line 4, column 'time_s': got 0.1"):
         require_increasing(t)
+
+
+def test_semicolon_file_is_explained_without_required_columns(tmp_path):
+    path = _write(tmp_path, "time_s;force_n;position_m\n0;1;0\n")
+    with pytest.raises(ConfigError, match="found ';'-separated names"):
+        read_table(path)

@@ -279,7 +279,8 @@ def _position_variance(vehicle: Vehicle, dof: str) -> tuple[float, float, str]:
     ch = DOF_POSITION_CHANNEL[dof]
     for s in vehicle.sensors:
         if s.kind == "motion_capture" and ch in s.variance:
-            return float(s.variance[ch]), float(s.rate_hz), f"motion capture {s.name!r}"
+            return (float(s.variance[ch]), float(s.rate_hz),
+                    f"observed by motion capture {s.name!r}: {ch} variance {float(s.variance[ch]):.4g} at {s.rate_hz:g} Hz")
     return QUALISYS_VARIANCE[ch], 10.0, (f"{vehicle.name} has no motion-capture sensor with {ch}: uDrone's Qualisys "
                                          "variance at 10 Hz (thesis table 4.8) is used")
 

@@ -148,31 +148,31 @@ def plot_damping(fit, path: str | Path, *, title: str = "") -> Path:
     return _save(fig, path)
 
 
-def plot_step(fit, path: str | Path, *, title: str = "", position_unit: str = "m", force_unit: str = "N") -> Path:
+def plot_step(fit, path: str | Path, *, title: str = "", position_unit: str = "m", force_unit: str = "N",
+              position_label: str = "position", force_label: str = "force") -> Path:
     """Force, position (measured vs simulated model), velocity, residuals."""
     fig, ax = _figure(4, height=2.3, sharex=True)
     t = fit.time_s
     ax[0, 0].step(t, fit.force, where="post", color="C2")
-    ax[0, 0].set_ylabel(f"force [{force_unit}]")
+    ax[0, 0].set_ylabel(f"{force_label} [{force_unit}]")
     ax[0, 0].set_title(title or "Step/relay response: output-error fit of k/(s + a)")
     a = ax[1, 0]
     a.plot(t, fit.position, ".", ms=2.5, color="C0", label="measured")
     a.plot(t, fit.position_fit, color="C3", lw=1.2, label="model (simulated)")
     se = fit.stderr
-    a.text(0.01, 0.97, f"k = {_pm(fit.gain, se['gain'])}, a = {_pm(fit.pole, se['pole'])} 1/s\n"
-           f"added mass (SNAME) = {_pm(fit.added_mass, se['added_mass'])}, "
-           f"linear damping = {_pm(fit.linear_damping, se['linear_damping'])}\n"
-           f"fit {fit.fit_percent:.2f} %, RMS {fit.rms:.3g} {position_unit}"
-           + (f", bias {_pm(fit.bias, se['bias'])} {force_unit}" if fit.bias_fitted else ""),
-           transform=a.transAxes, va="top", fontsize=8, family="monospace",
-           bbox=dict(facecolor="white", alpha=0.8, edgecolor="0.8"))
-    a.set_ylabel(f"position [{position_unit}]")
-    a.legend(loc="lower right", fontsize=8)
+    a.set_title(f"k = {_pm(fit.gain, se['gain'])}, a = {_pm(fit.pole, se['pole'])} 1/s\n"
+                f"added mass (SNAME) = {_pm(fit.added_mass, se['added_mass'])}, "
+                f"linear damping = {_pm(fit.linear_damping, se['linear_damping'])}\n"
+                f"fit {fit.fit_percent:.2f} %, RMS {fit.rms:.3g} {position_unit}"
+                + (f", bias {_pm(fit.bias, se['bias'])} {force_unit}" if fit.bias_fitted else ""),
+                fontsize=8, family="monospace", loc="left")
+    a.set_ylabel(f"{position_label} [{position_unit}]")
+    a.legend(loc="best", fontsize=8)
     v = ax[2, 0]
     v.plot(t, fit.velocity_smoothed, color="C0", lw=0.8, label="Savitzky-Golay derivative of measured")
     v.plot(t, fit.velocity_fit, color="C3", lw=1.2, label="model")
-    v.set_ylabel(f"velocity [{position_unit}/s]")
-    v.legend(loc="lower right", fontsize=8)
+    v.set_ylabel(f"{'rate' if position_label == 'heading' else 'velocity'} [{position_unit}/s]")
+    v.legend(loc="best", fontsize=8)
     r = ax[3, 0]
     r.axhline(0, color="0.5", lw=0.8)
     r.plot(t, fit.residual, color="C0", lw=0.8)

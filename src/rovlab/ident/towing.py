@@ -26,7 +26,7 @@ import numpy as np
 
 from rovlab.ident.fitting import (DAMPING_TERMS, IdentificationError, LinearFit, check_terms, damping_regressors,
                                   fit_damping, significant)
-from rovlab.ident.steady import Window, mean_with_stderr, plateau_window, rest_samples
+from rovlab.ident.steady import mean_with_stderr, plateau_window, rest_samples
 from rovlab.io.tables import DataTable, read_table, require_increasing, split_runs
 
 COLUMNS = ("run", "time_s", "speed_mps", "force_n")

@@ -386,7 +386,8 @@ def _cmd_step(args: argparse.Namespace) -> int:
     yaw = args.dof == "yaw" or table.has("heading_rad")
     png = _plot(args, "step", lambda p: plots.plot_step(
         fit, p, title=f"Relay/step response ({args.dof}): {Path(args.file).name}",
-        position_unit="rad" if yaw else "m", force_unit="N m" if yaw else "N"))
+        position_unit="rad" if yaw else "m", force_unit="N m" if yaw else "N",
+        position_label="heading" if yaw else "position", force_label="moment" if yaw else "force"))
     edits = step.step_edits(fit, args.dof)
     if args.added_mass_only:
         edits = {k: v for k, v in edits.items() if k.startswith("added_mass.")}

@@ -128,11 +128,11 @@ def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "d
                                    + (", ".join(required) if required else "time_s, ..."))], what)
     problems: list[Problem] = []
     where_header = f"line {header_line} (header)"
-    if len(header) == 1 and required and len(required) > 1:
-        sep = next((s for s in (";", "\t", " ") if s in header[0]), None)
+    sep = next((s for s in (";", "\t") if s in header[0]), None) if len(header) == 1 else None
+    if len(header) == 1 and (sep or (required and len(required) > 1)):
         hint = f" (found {sep!r}-separated names)" if sep else ""
-        problems.append(Problem(file, where_header, header[0],
-                                "comma-separated column names " + ", ".join(required) + hint))
+        names = ", ".join(required) if required else "time_s, ..."
+        problems.append(Problem(file, where_header, header[0], f"comma-separated column names {names}{hint}"))
         raise ConfigError(problems, what)
     for i, name in enumerate(header):
         if not name:
