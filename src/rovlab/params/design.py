@@ -1,0 +1,395 @@
+"""Filter and controller configuration: a frozen, validated, closed-schema TOML file.
+
+A configuration holds everything the depth-and-heading observer and the LQR need beyond the
+vehicle file (SPEC sections 5-6): the sample time, optional overrides of the model parameters,
+the white-noise power spectral densities W and the bias time constants, the measurement set
+(which sensor channels are fused, their variances and the sensor-management settings), the
+initial belief and the LQR weights. Packaged configurations live in ``params/configs``:
+
+* ``default``: the vehicle file's own model parameters and sensor variances; motion capture z
+  and psi plus pressure depth; a wide initial covariance so the filter locks on from any start.
+* ``thesis``: the design values of Sandøy 2016 (appendix scripts A.3-A.4, SPEC sections 5-6).
+
+File format (every table is closed: unknown keys are errors; ``source`` is required)::
+
+    name = "thesis"
+    source = "where the numbers came from"
+    sample_time = 0.1                      # h [s], filter and controller step
+
+    [model]                                # optional; absent keys come from the vehicle file
+    source = "..."
+    mass = 7.31                            # m [kg]
+    I_zz = 0.16                            # [kg m^2]
+    Z_wdot = -11.13                        # [kg]   (SNAME sign, <= 0)
+    N_rdot = -0.1                          # [kg m^2]
+    Z_w = -5.18                            # [N s/m]
+    N_r = -0.06656                         # [N m s/rad]
+
+    [process_noise]
+    source = "..."
+    psd = { w = 1e-2, r = 1e-8, b_w = 2e-1, b_r = 1e-3 }   # W of [w_w, w_r, w_bw, w_br]
+    bias_time_per_mass = 100.0             # T = 100 M (s per kg), or:
+    # bias_time_constant = { w = 1844.0, r = 26.0 }        # [s]
+
+    [initial]
+    source = "..."
+    state = { z = 1.05, psi_deg = 52.0 }   # missing entries are 0; keys z psi_deg w r_deg_s b_w b_r
+    std = {}                               # P0 = diag(std^2), missing entries 0
+
+    [fusion]                               # defaults for every measurement (all optional)
+    timeout_s = 0.5                        # lost when no finite sample for this long
+    gate_probability = 0.9999              # chi-square (1 dof) innovation gate; 1.0 = no gate
+    gate_failures_to_lose = 3              # consecutive gate failures that declare a sensor lost
+    recovery_time_s = 5.0                  # transitional-R ramp length after a sensor returns
+    recovery_variance_factor = 1e4         # R starts at factor * R_nominal, decays geometrically
+    reacquire_after_s = 5.0                # re-admit a gate-lost sensor that disagrees this long
+
+    [[measurements]]
+    sensor = "qualisys"                    # a sensor name of the vehicle file, or kind = "..."
+    quantity = "z"                         # z, psi, w or r
+    variance = 1.987803e-09                # optional; default: the vehicle file's variance
+    # any [fusion] key may be overridden here
+
+    [lqr]
+    source = "..."
+    state_max = { z = 1.5, psi_deg = 30.0, w = 0.5, r_deg_s = 1.8 }   # Bryson's rule, or
+    input_max = { Z = 10.0, N = 0.031415926535897934 }
+    input_weight = { Z = 0.1, N = 0.01 }   # optional multipliers (state_weight likewise)
+    # Q_diag = [...4...]  R_diag = [...2...]   # explicit weights instead of Bryson's rule
+    reference_gain = "discrete"            # or "continuous" (what the thesis computed)
+
+Units are SI and radians, except keys ending in ``_deg`` / ``_deg_s`` (degrees, degrees/s).
+This module only reads and checks the file; the maths lives in ``rovlab.estimation`` and
+``rovlab.control``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from rovlab.params.validate import Collector, ConfigError, Problem, TableReader, read_toml
+from rovlab.params.vehicle import SENSOR_CHANNELS, Sensor, Vehicle
+
+OBSERVER_STATES = ("z", "psi", "w", "r", "b_w", "b_r")
+CONTROL_STATES = ("z", "psi", "w", "r")
+INPUTS = ("Z", "N")
+MEASURABLE = ("z", "psi", "w", "r")  # quantities the depth-and-heading model can fuse
+MODEL_KEYS = ("mass", "I_zz", "Z_wdot", "N_rdot", "Z_w", "N_r")
+PSD_KEYS = ("w", "r", "b_w", "b_r")
+_DEG = math.pi / 180.0
+# state key in files -> (state index, factor to SI)
+_STATE_KEYS = {"z": (0, 1.0), "psi_deg": (1, _DEG), "w": (2, 1.0), "r_deg_s": (3, _DEG),
+               "b_w": (4, 1.0), "b_r": (5, 1.0)}
+_LQR_STATE_KEYS = {"z": (0, 1.0), "psi_deg": (1, _DEG), "w": (2, 1.0), "r_deg_s": (3, _DEG)}
+
+
+@dataclass(frozen=True)
+class FusionSettings:
+    """Sensor management of one measurement channel (see rovlab.estimation.fusion)."""
+
+    timeout_s: float | None = None  # None: 5 sample periods of the sensor's rate_hz
+    gate_probability: float = 0.9999
+    gate_failures_to_lose: int = 3
+    recovery_time_s: float = 5.0
+    recovery_variance_factor: float = 1e4
+    reacquire_after_s: float = 5.0
+
+
+@dataclass(frozen=True)
+class MeasurementConfig:
+    """One fused channel: a quantity of a sensor picked by name or by kind."""
+
+    quantity: str
+    sensor: str | None  # vehicle sensor name
+    kind: str | None  # or the first vehicle sensor of this kind
+    variance: float | None  # None: the vehicle file's variance for this channel
+    fusion: FusionSettings
+    key: str  # where it was read, e.g. "measurements[1]" (for error messages)
+    source: str = ""
+
+    def resolve(self, vehicle: Vehicle, file: str = "") -> Sensor:
+        """The vehicle's sensor this measurement refers to (ConfigError naming ``file`` if absent)."""
+        if self.sensor is not None:
+            for s in vehicle.sensors:
+                if s.name == self.sensor:
+                    return s
+            names = ", ".join(s.name for s in vehicle.sensors) or "none"
+            raise ConfigError([Problem(file, f"{self.key}.sensor", self.sensor,
+                                       f"a sensor of vehicle {vehicle.name!r} ({names})")],
+                              "filter configuration")
+        for s in vehicle.sensors:
+            if s.kind == self.kind:
+                return s
+        kinds = ", ".join(sorted({s.kind for s in vehicle.sensors})) or "none"
+        raise ConfigError([Problem(file, f"{self.key}.kind", self.kind,
+                                   f"a sensor kind present on vehicle {vehicle.name!r} ({kinds})")],
+                          "filter configuration")
+
+
+@dataclass(frozen=True, eq=False)
+class DesignConfig:
+    """A validated filter/controller configuration (SI units, radians)."""
+
+    name: str
+    description: str
+    sample_time: float  # h [s]
+    model_overrides: Mapping[str, float]  # subset of MODEL_KEYS
+    psd: np.ndarray  # W diagonal for [w_z, w_psi, w_w, w_r, w_bw, w_br] (first two are 0)
+    bias_time_per_mass: float | None  # T = factor * M, or
+    bias_time_constant: tuple[float, float] | None  # (T_w, T_r) [s]
+    measurements: tuple[MeasurementConfig, ...]
+    initial_state: np.ndarray  # x0 (6)
+    initial_std: np.ndarray  # sqrt(diag P0) (6)
+    lqr_Q: np.ndarray  # diagonal (4) of the state weight
+    lqr_R: np.ndarray  # diagonal (2) of the input weight
+    lqr_bryson: Mapping[str, np.ndarray] | None  # state_max, input_max, state_weight, input_weight
+    reference_gain: str  # "discrete" | "continuous"
+    sources: Mapping[str, str] = field(default_factory=dict)
+    file: str = ""
+
+    @property
+    def W(self) -> np.ndarray:
+        """Power spectral density matrix (6x6, diagonal) of the observer's white noise."""
+        return np.diag(self.psd)
+
+    @property
+    def P0(self) -> np.ndarray:
+        return np.diag(self.initial_std**2)
+
+    def model_values(self, vehicle: Vehicle) -> dict[str, float]:
+        """m, I_zz, Z_wdot, N_rdot, Z_w, N_r: the vehicle's values with this file's overrides."""
+        values = {
+            "m": vehicle.mass, "I_zz": vehicle.I_zz,
+            "Z_wdot": float(vehicle.added_mass[2]), "N_rdot": float(vehicle.added_mass[3]),
+            "Z_w": float(vehicle.damping_linear[2]), "N_r": float(vehicle.damping_linear[3]),
+        }
+        for key, value in self.model_overrides.items():
+            values["m" if key == "mass" else key] = float(value)
+        return values
+
+    def bias_time_constants(self, M_w: float, M_r: float) -> tuple[float, float]:
+        """(T_w, T_r) [s] of the Gauss-Markov bias states."""
+        if self.bias_time_constant is not None:
+            return self.bias_time_constant
+        k = float(self.bias_time_per_mass)  # type: ignore[arg-type]
+        return k * M_w, k * M_r
+
+
+# --------------------------------------------------------------------------------------------
+# Loading
+# --------------------------------------------------------------------------------------------
+
+def packaged_config_names() -> list[str]:
+    folder = resources.files("rovlab.params") / "configs"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def packaged_config_path(name: str) -> Path:
+    return Path(str(resources.files("rovlab.params") / "configs" / f"{name}.toml"))
+
+
+def resolve_config_path(name_or_path: str | Path) -> Path:
+    """A packaged configuration name (``thesis``, ``default``) or a path to a TOML file."""
+    text = str(name_or_path)
+    path = Path(text)
+    if path.suffix == ".toml" or path.exists() or "/" in text:
+        return path
+    if text in packaged_config_names():
+        return packaged_config_path(text)
+    raise ConfigError([Problem(text, "", text, "a configuration file path or a packaged configuration: "
+                               + ", ".join(packaged_config_names()))], "filter configuration")
+
+
+def load_design_config(name_or_path: str | Path = "default") -> DesignConfig:
+    """Load and validate a configuration; raises :class:`ConfigError` listing every problem."""
+    path = resolve_config_path(name_or_path)
+    return design_config_from_dict(read_toml(path), file=str(path))
+
+
+def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") -> DesignConfig:
+    col = Collector(file)
+    top = TableReader(dict(data), col)
+    sources: dict[str, str] = {}
+    name = top.string("name")
+    description = top.string("description", "")
+    sources["config"] = top.string("source")
+    h = top.number("sample_time", positive=True, what="filter and controller step in s")
+
+    overrides: dict[str, float] = {}
+    if top.has("model"):
+        mt = top.table("model")
+        sources["model"] = mt.string("source")
+        for key in MODEL_KEYS:
+            if mt.has(key):
+                if key in ("mass", "I_zz"):
+                    overrides[key] = mt.number(key, positive=True)
+                else:
+                    overrides[key] = mt.number(key, nonpositive=True, what="SNAME sign: <= 0")
+        mt.finish()
+
+    pn = top.table("process_noise")
+    sources["process_noise"] = pn.string("source")
+    psd = np.zeros(6)
+    pt = pn.table("psd")
+    for i, key in enumerate(PSD_KEYS):
+        psd[2 + i] = pt.number(key, nonnegative=True, what="power spectral density, SI")
+    pt.finish()
+    per_mass: float | None = None
+    constants: tuple[float, float] | None = None
+    if pn.has("bias_time_per_mass") == pn.has("bias_time_constant"):
+        pn.problem("bias_time_per_mass", "both" if pn.has("bias_time_per_mass") else "neither",
+                   "exactly one of bias_time_per_mass and bias_time_constant = { w = ..., r = ... }")
+        pn.raw("bias_time_per_mass", None)
+        pn.raw("bias_time_constant", None)
+    elif pn.has("bias_time_per_mass"):
+        per_mass = pn.number("bias_time_per_mass", positive=True, what="T = factor * M")
+    else:
+        bt = pn.table("bias_time_constant")
+        constants = (bt.number("w", positive=True, what="s"), bt.number("r", positive=True, what="s"))
+        bt.finish()
+    pn.finish()
+
+    it = top.table("initial")
+    sources["initial"] = it.string("source")
+    x0 = _state_table(it, "state", _STATE_KEYS, nonnegative=False)
+    std = _state_table(it, "std", _STATE_KEYS, nonnegative=True)
+    it.finish()
+
+    defaults = _fusion_settings(top.table("fusion", required=False), FusionSettings(), col)
+
+    measurements: list[MeasurementConfig] = []
+    for mr in top.tables("measurements", min_count=1):
+        measurements.append(_measurement(mr, defaults))
+    seen: dict[tuple[str | None, str | None, str], str] = {}
+    for m in measurements:
+        ident = (m.sensor, m.kind, m.quantity)
+        if ident in seen:
+            top.problem("measurements", f"{m.key} repeats {seen[ident]}",
+                        "each sensor quantity at most once")
+        seen[ident] = m.key
+
+    lt = top.table("lqr")
+    sources["lqr"] = lt.string("source")
+    Q, R, bryson = _lqr_weights(lt)
+    reference = lt.string("reference_gain", "discrete", choices=("discrete", "continuous"))
+    lt.finish()
+    top.finish()
+    col.raise_if_any("filter configuration")
+
+    for arr in (psd, x0, std, Q, R):
+        arr.setflags(write=False)
+    return DesignConfig(
+        name=name, description=description, sample_time=h, model_overrides=overrides, psd=psd,
+        bias_time_per_mass=per_mass, bias_time_constant=constants, measurements=tuple(measurements),
+        initial_state=x0, initial_std=std, lqr_Q=Q, lqr_R=R, lqr_bryson=bryson,
+        reference_gain=reference, sources=sources, file=file,
+    )
+
+
+def _state_table(t: TableReader, name: str, keys: Mapping[str, tuple[int, float]], *,
+                 nonnegative: bool) -> np.ndarray:
+    out = np.zeros(6)
+    sub = t.table(name, required=False)
+    for key, (i, factor) in keys.items():
+        if sub.has(key):
+            out[i] = sub.number(key, nonnegative=nonnegative) * factor
+    sub.finish()
+    return out
+
+
+def _fusion_settings(t: TableReader, base: FusionSettings, col: Collector) -> FusionSettings:
+    timeout = t.number("timeout_s", base.timeout_s, positive=True) if t.has("timeout_s") else base.timeout_s
+    settings = FusionSettings(
+        timeout_s=timeout,
+        gate_probability=t.number("gate_probability", base.gate_probability, lo=0.5, hi=1.0,
+                                  what="chi-square gate probability; 1.0 disables the gate"),
+        gate_failures_to_lose=t.integer("gate_failures_to_lose", base.gate_failures_to_lose, lo=1),
+        recovery_time_s=t.number("recovery_time_s", base.recovery_time_s, nonnegative=True,
+                                 what="0 = no transitional R"),
+        recovery_variance_factor=t.number("recovery_variance_factor", base.recovery_variance_factor,
+                                          lo=1.0),
+        reacquire_after_s=t.number("reacquire_after_s", base.reacquire_after_s, nonnegative=True,
+                                   what="0 = never re-admit a sensor the gate keeps rejecting"),
+    )
+    if t.path == "fusion":
+        t.finish()
+    return settings
+
+
+def _measurement(t: TableReader, defaults: FusionSettings) -> MeasurementConfig:
+    sensor = t.string("sensor") if t.has("sensor") else None
+    kind = t.string("kind", choices=tuple(SENSOR_CHANNELS)) if t.has("kind") else None
+    if (sensor is None) == (kind is None):
+        t.problem("sensor", "both sensor and kind" if sensor is not None else "neither sensor nor kind",
+                  "exactly one of sensor = NAME (a vehicle sensor) and kind = KIND")
+    quantity = t.string("quantity", choices=MEASURABLE)
+    if kind and quantity and quantity not in SENSOR_CHANNELS.get(kind, ()):
+        t.problem("quantity", quantity, f"a channel of a {kind} sensor: "
+                  + ", ".join(c for c in SENSOR_CHANNELS[kind] if c in MEASURABLE))
+    variance = t.number("variance", positive=True, what="SI units squared") if t.has("variance") else None
+    source = t.string("source", "")
+    fusion = _fusion_settings(t, defaults, t.collector)
+    t.finish()
+    return MeasurementConfig(quantity=quantity, sensor=sensor, kind=kind, variance=variance,
+                             fusion=fusion, key=t.path, source=source)
+
+
+def _lqr_weights(t: TableReader) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray] | None]:
+    bryson_keys = ("state_max", "input_max", "state_weight", "input_weight")
+    uses_bryson = t.has("state_max") or t.has("input_max")
+    uses_explicit = t.has("Q_diag") or t.has("R_diag")
+    if uses_bryson == uses_explicit:
+        t.problem("state_max", "both forms" if uses_bryson else "neither form",
+                  "either Bryson's rule (state_max and input_max) or explicit Q_diag and R_diag")
+        for k in bryson_keys + ("Q_diag", "R_diag"):
+            t.raw(k, None)
+        return np.full(4, np.nan), np.full(2, np.nan), None
+    if uses_explicit:
+        Q = t.vector("Q_diag", 4, what="weights of z, psi, w, r (SI)")
+        R = t.vector("R_diag", 2, what="weights of Z, N (SI)")
+        for name, arr in (("Q_diag", Q), ("R_diag", R)):
+            if np.all(np.isfinite(arr)) and (np.any(arr < 0) or (name == "R_diag" and np.any(arr <= 0))):
+                t.problem(name, arr.tolist(), "non-negative state weights and positive input weights")
+        return Q, R, None
+    smax = np.full(4, np.nan)
+    sub = t.table("state_max")
+    for key, (i, factor) in _LQR_STATE_KEYS.items():
+        smax[i] = sub.number(key, positive=True) * factor
+    sub.finish()
+    umax = np.full(2, np.nan)
+    sub = t.table("input_max")
+    for i, key in enumerate(INPUTS):
+        umax[i] = sub.number(key, positive=True, what="N or N m")
+    sub.finish()
+    sw = np.ones(4)
+    sub = t.table("state_weight", required=False)
+    for key in ("z", "psi", "w", "r"):
+        if sub.has(key):
+            sw[CONTROL_STATES.index(key)] = sub.number(key, nonnegative=True)
+    sub.finish()
+    uw = np.ones(2)
+    sub = t.table("input_weight", required=False)
+    for i, key in enumerate(INPUTS):
+        if sub.has(key):
+            uw[i] = sub.number(key, positive=True)
+    sub.finish()
+    # Bryson's rule (Bryson & Ho 1975): weight_i / max_i^2. Kept as plain arithmetic here so the
+    # params layer does not import rovlab.control; rovlab.control.lqr.bryson is the same rule.
+    Q = sw / smax**2
+    R = uw / umax**2
+    return Q, R, {"state_max": smax, "input_max": umax, "state_weight": sw, "input_weight": uw}
+
+
+def check_design_config_file(name_or_path: str | Path) -> list[Problem]:
+    """Every problem of a configuration file (empty list when valid)."""
+    try:
+        load_design_config(name_or_path)
+    except ConfigError as exc:
+        return exc.problems
+    return []
