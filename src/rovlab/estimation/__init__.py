@@ -1,1 +1,13 @@
-"""rovlab.estimation"""
+"""State estimation, one module per role (SPEC section 5):
+
+* ``discretise``  -- zero-order-hold discretisation and Van Loan's process-noise covariance
+* ``model``       -- the depth-and-heading observer model from a vehicle and a configuration,
+                     measurement channels, observability check
+* ``fusion``      -- per-channel sensor management: timeouts, non-finite samples, chi-square gate,
+                     transitional variance, manual override (compiled)
+* ``kalman``      -- the discrete Kalman filter: compiled kernels, Belief, DepthHeadingFilter
+* ``consistency`` -- NEES / NIS with chi-square bounds for Monte Carlo checks
+
+Submodules are imported explicitly (``from rovlab.estimation.kalman import DepthHeadingFilter``),
+so importing one does not pull in the others.
+"""

@@ -1,0 +1,131 @@
+"""Filter/controller configurations and the observer model built from them (SPEC section 5)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rovlab.estimation.model import build_filter_model, observability
+from rovlab.params.design import (
+    check_design_config_file, design_config_from_dict, load_design_config, packaged_config_names,
+    packaged_config_path,
+)
+from rovlab.params.validate import ConfigError, read_toml
+from rovlab.params.vehicle import load_vehicle
+
+
+def _config(**changes):
+    """The thesis configuration as a dict, with top-level tables replaced."""
+    data = read_toml(packaged_config_path("thesis"))
+    data.update(changes)
+    return data
+
+
+def test_packaged_configs_load_and_build_for_udrone():
+    assert {"default", "thesis"} <= set(packaged_config_names())
+    udrone = load_vehicle("udrone")
+    for name in packaged_config_names():
+        assert check_design_config_file(name) == []
+        model = build_filter_model(udrone, load_design_config(name))
+        assert model.observable
+        assert [c.name for c in model.channels] == ["qualisys.z", "pressure.z", "qualisys.psi"]
+
+
+def test_thesis_config_values():
+    # SPEC section 5 / thesis appendix A.3
+    c = load_design_config("thesis")
+    assert c.sample_time == 0.1
+    assert c.model_values(load_vehicle("udrone")) == {
+        "m": 7.31, "I_zz": 0.16, "Z_wdot": -11.13, "N_rdot": -0.1, "Z_w": -5.18, "N_r": -0.06656}
+    np.testing.assert_array_equal(np.diag(c.W), [0, 0, 1e-2, 1e-8, 2e-1, 1e-3])
+    np.testing.assert_allclose(c.initial_state, [1.05, math.radians(52), 0, 0, 0, 0], rtol=1e-15)
+    np.testing.assert_array_equal(c.P0, np.zeros((6, 6)))
+    model = build_filter_model(load_vehicle("udrone"), c)
+    np.testing.assert_array_equal(np.diag(model.R), [1.987803e-09, 1.189622e-04, 1.641552e-06])
+    np.testing.assert_array_equal(model.H, [[1, 0, 0, 0, 0, 0], [1, 0, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0]])
+
+
+def test_default_config_takes_the_vehicle_values():
+    udrone = load_vehicle("udrone")
+    model = build_filter_model(udrone, load_design_config("default"))
+    assert model.params.M_w == pytest.approx(7.31 + 14.57) and model.params.N_r == -0.07
+    assert model.R[1, 1] == udrone.sensor("pressure").variance["z"]
+    # lever arm of the pressure sensor (SPEC section 2: [0.12315, 0, -0.0465] m): z_VO = z_p - l_z
+    assert model.channels[1].offset == -0.0465
+    assert model.channels[0].timeout_s == pytest.approx(0.5)  # 5 periods at 10 Hz
+
+
+def test_default_config_needs_the_sensor_kinds():
+    with pytest.raises(ConfigError, match="motion_capture"):
+        build_filter_model(load_vehicle("bluerov2_heavy"), load_design_config("default"))
+
+
+def test_unobservable_sensor_sets_are_refused_naming_the_states():
+    udrone = load_vehicle("udrone")
+    only_pressure = design_config_from_dict(_config(measurements=[{"sensor": "pressure", "quantity": "z"}]))
+    with pytest.raises(ConfigError) as err:
+        build_filter_model(udrone, only_pressure)
+    text = str(err.value)
+    assert "psi, r, b_r" in text and "Add a measurement of psi" in text
+    model = build_filter_model(udrone, only_pressure, require_observable=False)
+    assert not model.observable and model.unobservable == ("psi", "r", "b_r")
+    only_heading = design_config_from_dict(_config(measurements=[{"sensor": "qualisys", "quantity": "psi"}]))
+    with pytest.raises(ConfigError, match="z, w, b_w"):
+        build_filter_model(udrone, only_heading)
+
+
+def test_observability_check_on_textbook_cases():
+    A = build_filter_model(load_vehicle("udrone"), load_design_config("thesis")).A
+    # velocities alone never give the positions (pure integrators)
+    ok, touched, V = observability(A, np.eye(6)[[2, 3]])
+    assert not ok and touched == ("z", "psi") and V.shape[1] == 2
+    # depth and heading observe everything, biases included (thesis eq. 5.16)
+    assert observability(A, np.eye(6)[[0, 1]])[0]
+
+
+def test_measurement_variance_falls_back_to_the_vehicle_and_must_exist():
+    udrone = load_vehicle("udrone")
+    cfg = design_config_from_dict(_config(measurements=[
+        {"sensor": "qualisys", "quantity": "z"}, {"sensor": "qualisys", "quantity": "psi"}]))
+    model = build_filter_model(udrone, cfg)
+    assert model.R[0, 0] == udrone.sensor("qualisys").variance["z"]
+    cfg = design_config_from_dict(_config(measurements=[
+        {"sensor": "qualisys", "quantity": "z"}, {"sensor": "imu", "quantity": "psi"}]), file="my.toml")
+    with pytest.raises(ConfigError, match=r"my.toml: measurements\[1\].variance.*imu.psi"):
+        build_filter_model(udrone, cfg)
+    cfg = design_config_from_dict(_config(measurements=[{"sensor": "sonar", "quantity": "z"}]), file="my.toml")
+    with pytest.raises(ConfigError, match="sensor of vehicle 'udrone'"):
+        build_filter_model(udrone, cfg)
+
+
+def test_bad_configuration_lists_every_problem():
+    data = _config()
+    data["sample_time"] = -0.1
+    data["colour"] = "blue"
+    data["process_noise"] = dict(data["process_noise"], bias_time_constant={"w": 10.0, "r": 5.0})
+    data["fusion"] = dict(data["fusion"], gate_probability=0.2)
+    data["measurements"] = [{"sensor": "qualisys", "quantity": "x"}, {"quantity": "z"}]
+    del data["lqr"]["source"]
+    with pytest.raises(ConfigError) as err:
+        design_config_from_dict(data, file="bad.toml")
+    text = str(err.value)
+    for needle in ("bad.toml: sample_time", "bad.toml: colour", "unknown keys are errors",
+                   "process_noise.bias_time_per_mass", "fusion.gate_probability",
+                   "measurements[0].quantity", "measurements[1].sensor", "lqr.source"):
+        assert needle in text, needle
+    assert len(err.value.problems) == 7
+
+
+def test_lqr_weights_forms():
+    data = _config()
+    data["lqr"] = {"source": "test", "Q_diag": [1.0, 2.0, 3.0, 4.0], "R_diag": [0.5, 0.25]}
+    c = design_config_from_dict(data)
+    np.testing.assert_array_equal(c.lqr_Q, [1, 2, 3, 4])
+    data["lqr"] = {"source": "test", "Q_diag": [1.0, 2.0, 3.0, 4.0], "R_diag": [0.5, 0.0]}
+    with pytest.raises(ConfigError, match="positive input weights"):
+        design_config_from_dict(data)
+    data["lqr"] = {"source": "test"}
+    with pytest.raises(ConfigError, match="either Bryson"):
+        design_config_from_dict(data)
