@@ -1,1 +1,6 @@
-"""rovlab.control"""
+"""Control (SPEC section 6):
+
+* ``lqr`` -- discrete LQR for depth and heading, Bryson's rule, reference feed-forward
+* ``lqg`` -- the LQG law tau = P r - K [eta; nu] - b_hat (compiled kernel) and the thruster
+             mapping of tau = [Z, N] through the allocation
+"""

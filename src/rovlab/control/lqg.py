@@ -1,0 +1,90 @@
+"""The LQG control law and the thruster mapping behind it (SPEC sections 3 and 6).
+
+With the Kalman estimate x_hat = [z, psi, w, r, b_w, b_r] and references r = [z_ref, psi_ref]:
+
+    tau = P r - K [z, psi', w, r] - [b_w, b_r]
+
+* the bias estimate is **subtracted**: in the model the bias enters like a force
+  (M nu_dot = ... + tau + b), so tau = ... - b_hat cancels it (SPEC section 11: the thesis's
+  eq. 5.29 adds it);
+* the heading error is wrapped: psi' = psi_ref - wrap(psi_ref - psi_hat) is the heading
+  equivalent to psi_hat (modulo 2 pi) nearest to the reference, so a vehicle at 179 deg told to
+  go to -179 deg turns 2 deg, not 358 deg. With P_psi = K_psi (true for this model, see
+  rovlab.control.lqr) the heading term is K_psi wrap(psi_ref - psi_hat).
+
+:func:`lqg_tau` is a numba kernel for the simulator's compiled loop::
+
+    lqg_tau(K (2 x 4), P (2 x 2), x_hat (6), ref (2), tau_out (2)) -> None
+
+:class:`ThrusterMapping` turns tau = [Z, N] into the 4-DOF wrench [0, 0, Z, N] (X = Y = 0,
+and K = M = 0 demanded by the allocation) and allocates it to thruster forces and PWM with
+:class:`rovlab.allocation.Allocator` (saturation-aware).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from rovlab.allocation import AllocationResult, Allocator
+from rovlab.control.lqr import LQRDesign
+from rovlab.params.vehicle import Vehicle
+
+_TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True)
+def lqg_tau(K, P, x_hat, ref, tau):
+    e_psi = ref[1] - x_hat[1]
+    e_psi -= _TWO_PI * math.ceil((e_psi - math.pi) / _TWO_PI)  # to (-pi, pi]
+    psi_eq = ref[1] - e_psi
+    for i in range(2):
+        acc = P[i, 0] * ref[0] + P[i, 1] * ref[1]
+        acc -= K[i, 0] * x_hat[0] + K[i, 1] * psi_eq + K[i, 2] * x_hat[2] + K[i, 3] * x_hat[3]
+        tau[i] = acc - x_hat[4 + i]
+
+
+@dataclass(frozen=True, eq=False)
+class LQGController:
+    """tau = P r - K [eta_hat; nu_hat] - b_hat for the depth-and-heading filter's estimate."""
+
+    K: np.ndarray  # 2 x 4
+    P: np.ndarray  # 2 x 2
+
+    @classmethod
+    def from_design(cls, design: LQRDesign) -> "LQGController":
+        return cls(K=np.ascontiguousarray(design.K), P=np.ascontiguousarray(design.P))
+
+    def tau(self, x_hat: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        """[Z, N] for an estimate x_hat (6) and references [z_ref, psi_ref] (SI, radians)."""
+        x = np.ascontiguousarray(x_hat, dtype=float)
+        r = np.ascontiguousarray(ref, dtype=float)
+        if x.shape != (6,) or r.shape != (2,):
+            raise ValueError(f"x_hat must have 6 entries and ref 2, got {x.shape} and {r.shape}")
+        out = np.empty(2)
+        lqg_tau(self.K, self.P, x, r, out)
+        return out
+
+
+def tau_to_wrench(tau: np.ndarray) -> np.ndarray:
+    """The 4-DOF wrench [X, Y, Z, N] = [0, 0, Z, N] of a depth-and-heading demand [Z, N]."""
+    Z, N = np.asarray(tau, dtype=float).ravel()
+    return np.array([0.0, 0.0, Z, N])
+
+
+class ThrusterMapping:
+    """tau = [Z, N] -> thruster forces and PWM through the vehicle's allocation."""
+
+    def __init__(self, vehicle: Vehicle, allocator: Allocator | None = None) -> None:
+        self.vehicle = vehicle
+        self.allocator = allocator if allocator is not None else Allocator(vehicle)
+
+    def allocate(self, tau: np.ndarray) -> AllocationResult:
+        """Forces, PWM, achieved wrench and saturation report for the demand [Z, N]."""
+        return self.allocator.allocate(tau_to_wrench(tau))
+
+    def pwm_us(self, tau: np.ndarray) -> np.ndarray:
+        return self.allocate(tau).pwm_us
