@@ -1,0 +1,120 @@
+"""Command-line contract of issue 3: ``rovlab design`` and ``rovlab filter``."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from rovlab.interfaces.cli import main
+from rovlab.io.logs import read_log, write_csv
+from rovlab.params.design import packaged_config_path
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_design_json_contract(capsys):
+    code, out, _ = run(capsys, "design", "--config", "thesis", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert {"Phi", "Delta", "Gamma", "Q", "H", "R", "K", "P", "observable"} <= set(data)
+    assert data["observable"] is True
+    assert np.array(data["Phi"]).shape == (6, 6) and np.array(data["Delta"]).shape == (6, 2)
+    assert np.array(data["H"]).shape == (3, 6) and np.array(data["R"]).shape == (3, 3)
+    np.testing.assert_allclose(data["K"], [[17.7318, 0, 54.0771, 0], [0, 0.148116, 0, 2.41781]], rtol=5e-6)
+    assert data["Q"][4][4] == pytest.approx(0.02, abs=5e-3)  # thesis eq. 5.31
+
+
+def test_design_default_and_human_output(capsys):
+    code, out, _ = run(capsys, "design")
+    assert code == 0 and "observable: yes" in out and "K (LQR)" in out and "pressure.z" in out
+
+
+def test_design_refuses_an_unobservable_sensor_set(capsys, tmp_path):
+    text = packaged_config_path("thesis").read_text()
+    head = text[: text.index("[[measurements]]")]
+    cfg = tmp_path / "pressure_only.toml"
+    cfg.write_text(head + '[[measurements]]\nsensor = "pressure"\nquantity = "z"\n\n'
+                   + text[text.index("[lqr]"):])
+    code, _, err = run(capsys, "design", "--config", str(cfg), "--json")
+    assert code == 2 and "Traceback" not in err
+    assert "psi, r, b_r" in err
+    code, out, _ = run(capsys, "design", "--config", str(cfg), "--json", "--allow-unobservable")
+    data = json.loads(out)
+    assert code == 0 and data["observable"] is False and data["unobservable"] == ["psi", "r", "b_r"]
+
+
+def _log(n=300, h=0.1, seed=1):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * h
+    z = 1.0 + 0.2 * np.sin(2 * np.pi * t / 20.0)
+    psi = np.radians(30.0) + 0.1 * np.sin(2 * np.pi * t / 25.0)
+    cols = {
+        "time_s": t,
+        "tau_Z": np.zeros(n),
+        "tau_N": np.zeros(n),
+        "z_qualisys": z + 4e-5 * rng.standard_normal(n),
+        "z_pressure": z - 0.0465 + 0.011 * rng.standard_normal(n),
+        "psi_qualisys": psi + 1e-3 * rng.standard_normal(n),
+    }
+    cols["z_qualisys"][100:150] = np.nan  # Qualisys drop-out
+    cols["psi_qualisys"][100:150] = np.nan
+    return cols
+
+
+def test_filter_a_log(capsys, tmp_path):
+    log_path = tmp_path / "log.csv"
+    write_csv(log_path, _log())
+    out_path = tmp_path / "est.csv"
+    code, out, err = run(capsys, "filter", str(log_path), "--out", str(out_path))
+    assert code == 0, err
+    assert "300 samples" in out and "qualisys.z" in out
+    est = read_log(out_path)
+    for col in ("z", "psi", "w", "r", "b_w", "b_r", "var_z", "var_psi", "var_w", "var_r", "var_b_w", "var_b_r"):
+        assert col in est.data and np.all(np.isfinite(est[col])), col
+    status = est.text["status_z_qualisys"]
+    assert status[50] == "ok" and status[140] == "lost-timeout" and status[152] == "recovering"
+    assert set(est.text["status_z_pressure"]) == {"ok"}
+    truth = 1.0 + 0.2 * np.sin(2 * np.pi * est.time / 20.0)
+    assert np.max(np.abs(est["z"][50:] - truth[50:])) < 0.03
+    assert abs(math.degrees(est["psi"][-1]) - 30.0 - math.degrees(0.1 * np.sin(2 * np.pi * 29.9 / 25.0))) < 1.0
+
+
+def test_filter_to_stdout_and_with_a_gap(capsys, tmp_path):
+    cols = _log(n=60)
+    keep = np.ones(60, dtype=bool)
+    keep[30] = False
+    log_path = tmp_path / "gap.csv"
+    write_csv(log_path, {k: v[keep] for k, v in cols.items()})
+    code, out, err = run(capsys, "filter", str(log_path), "--out", "-")
+    assert code == 0 and out.splitlines()[2].startswith("time_s,z,psi") and "bridged" in err
+
+
+@pytest.mark.parametrize("body, needle", [
+    ("time_s,tau_Z,tau_N,z_qualisys,z_pressure\n0,0,0,1,1\n", "missing: psi_qualisys"),
+    ("time_s,tau_Z,tau_N,z_qualisys,z_pressure,psi_qualisys\n0,0,0,1,1,0\n0.1,0,zero,1,1,0\n",
+     "line 3, column 'tau_N'"),
+    ("time_s,tau_Z,tau_N,z_qualisys,z_pressure,psi_qualisys\n0,0,0,1,1,0\n0.1,0,0,1,1,0\n0.1,0,0,1,1,0\n",
+     "line 4, column 'time_s'"),
+    ("time_s,tau_Z,tau_N,z_qualisys,z_pressure,psi_qualisys\n0,0,0,1,1,0\n0.16,0,0,1,1,0\n",
+     "line 3, column 'time_s'"),
+])
+def test_filter_malformed_logs_are_clean_errors(capsys, tmp_path, body, needle):
+    path = tmp_path / "bad.csv"
+    path.write_text(body)
+    code, _, err = run(capsys, "filter", str(path), "--out", str(tmp_path / "est.csv"))
+    assert code == 2 and "Traceback" not in err and needle in err, err
+    assert not (tmp_path / "est.csv").exists()
+
+
+def test_filter_unwritable_output_is_a_clean_error(capsys, tmp_path):
+    log_path = tmp_path / "log.csv"
+    write_csv(log_path, _log(n=20))
+    code, _, err = run(capsys, "filter", str(log_path), "--out", str(tmp_path / "no" / "such" / "est.csv"))
+    assert code == 2 and "cannot write" in err
