@@ -12,6 +12,7 @@ from typing import Sequence
 _COMMAND_MODULES = (
     "rovlab.interfaces.cli_vehicle",
     "rovlab.interfaces.cli_ident",
+    "rovlab.interfaces.cli_sim",
     "rovlab.interfaces.cli_design",
 )
 

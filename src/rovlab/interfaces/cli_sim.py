@@ -1,0 +1,198 @@
+"""Sub-commands ``simulate`` (one scenario, optionally Monte Carlo) and ``demo`` (the main job:
+the three thesis case studies on uDrone, with a report). Interfaces hold no maths."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    sim = sub.add_parser("simulate", help="run a closed-loop scenario (packaged name or TOML file)")
+    sim.add_argument("scenario", help="packaged scenario name or TOML path (rovlab scenarios lists them)")
+    sim.add_argument("--out", default=None, help="output folder (default: out/<scenario>)")
+    sim.add_argument("--seed", type=int, default=None, help="seed (default: the scenario's); replays one run")
+    sim.add_argument("--runs", type=int, default=1, help="Monte Carlo: number of runs (seeds seed .. seed+N-1)")
+    sim.add_argument("--workers", type=int, default=None, help="parallel worker processes (default: all cores)")
+    sim.add_argument("--backend", choices=("processes", "dask"), default="processes",
+                     help="where Monte Carlo runs go (dask needs rovlab[dask])")
+    sim.add_argument("--scheduler", default=None, help="Dask scheduler address (default: a local cluster)")
+    sim.add_argument("--no-figures", action="store_true", help="skip PNGs and report.html (faster)")
+    sim.set_defaults(func=_cmd_simulate)
+
+    lst = sub.add_parser("scenarios", help="list the packaged scenarios")
+    lst.set_defaults(func=_cmd_list)
+
+    demo = sub.add_parser("demo", help="the main job: the thesis case studies on uDrone, with a report")
+    demo.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
+    demo.add_argument("--runs", type=int, default=200, help="Monte Carlo runs for the consistency check (default 200)")
+    demo.add_argument("--workers", type=int, default=None, help="parallel worker processes (default: all cores)")
+    demo.set_defaults(func=_cmd_demo)
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from rovlab.sim.scenario import load_scenario, packaged_scenario_names
+
+    for name in packaged_scenario_names():
+        sc = load_scenario(name)
+        print(f"{name:22s} {sc.description}")
+    return 0
+
+
+def _check_counts(args: argparse.Namespace) -> None:
+    from rovlab.interfaces.cli import UserError
+
+    if args.runs < 1:
+        raise UserError(f"--runs must be at least 1, got {args.runs}")
+    if args.workers is not None and args.workers < 1:
+        raise UserError(f"--workers must be at least 1, got {args.workers}")
+    if getattr(args, "seed", None) is not None and args.seed < 0:
+        raise UserError(f"--seed must be >= 0, got {args.seed}")
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from rovlab.sim.scenario import load_scenario_data
+
+    _check_counts(args)
+    data, file = load_scenario_data(args.scenario)
+    name = str(data.get("name") or Path(file).stem)
+    out = Path(args.out or Path("out") / name)
+    result, metrics, notes = _run_and_write(data, file, args.seed, out, figures=not args.no_figures)
+    sc = result.scenario
+    print(f"{sc.name} (seed {sc.seed}, {sc.plant} plant, {sc.duration_s:g} s) -> {out}/")
+    if args.runs > 1:
+        summary = _monte_carlo(data, file, sc.seed, args.runs, args.workers, args.backend, args.scheduler, out,
+                               result, metrics, notes)
+        _print_mc(summary)
+    _print_summary([(sc.name, metrics)])
+    for n in notes:
+        print(f"note: {n}", file=sys.stderr)
+    return 0
+
+
+def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
+    from rovlab.sim.output import write_run
+    from rovlab.sim.runner import prepare, run_prepared, summarise
+
+    prep = prepare(data, file=file, seed=seed)
+    result = run_prepared(prep)
+    metrics = summarise(result)
+    notes: list[str] = []
+    write_run(out, result, metrics, figures=figures, report=figures, notes=notes)
+    return result, metrics, notes
+
+
+def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path, result, metrics, notes):
+    from rovlab.sim.montecarlo import Progress, run_many, summarise_runs
+    from rovlab.sim.output import write_json, write_monte_carlo
+
+    seeds = list(range(seed, seed + runs))
+    t0 = time.perf_counter()
+    done = run_many(data, file, seeds, workers=workers, backend=backend, scheduler=scheduler,
+                    progress=Progress(f"Monte Carlo {result.scenario.name}"))
+    wall = time.perf_counter() - t0
+    summary = summarise_runs(done)
+    summary["wall_time_s"] = wall
+    summary["interrupted"] = len(done) < runs
+    n_plant = len(result.columns["time_s"]) * int(result.meta["sample_time_s"] / result.meta["plant_step_s"] + 0.5)
+    summary["vehicle_steps_per_s"] = len(done) * n_plant / wall if wall > 0 else None
+    write_monte_carlo(out / "monte_carlo", result.scenario.name, summary, done, result.columns["time_s"], notes=notes)
+    metrics = dict(metrics)
+    metrics["monte_carlo"] = summary
+    write_json(out / "metrics.json", metrics)
+    return summary
+
+
+def _print_mc(summary: dict[str, Any]) -> None:
+    n = summary["runs"]
+    print(f"Monte Carlo: {n} runs in {summary['wall_time_s']:.2f} s"
+          + (f" ({summary['vehicle_steps_per_s'] / 1e6:.1f} M vehicle-steps/s)" if summary.get("vehicle_steps_per_s") else "")
+          + (" -- interrupted, partial results kept" if summary.get("interrupted") else ""))
+    nees = summary.get("nees")
+    if nees:
+        print(f"  NEES: average {nees['mean']:.2f} for {nees['dof']} states (95 % bounds "
+              f"{nees['mean_bounds'][0]:.2f}-{nees['mean_bounds'][1]:.2f}); "
+              f"{100 * nees['share_inside']:.0f} % of time steps inside the per-step bounds")
+    for key in ("rms_error.z", "rms_error.psi", "settling_time_s.z", "overshoot.z"):
+        s = summary["metrics"].get(key)
+        if s and s.get("count"):
+            print(f"  {key:22s} mean {s['mean']:.4g}  std {s['std']:.3g}  [p5 {s['p5']:.4g}, p95 {s['p95']:.4g}]")
+
+
+def _fmt(v: Any, k: float = 1.0, digits: int = 3) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return f"{v * k:.{digits}g}"
+
+
+def _print_summary(rows: list[tuple[str, dict[str, Any]]]) -> None:
+    deg = 180.0 / math.pi
+    head = f"{'case':22s} {'RMS z [m]':>10s} {'RMS psi [deg]':>13s} {'RMS w [m/s]':>11s} {'settle z [s]':>12s} " \
+           f"{'overshoot z':>11s} {'settle psi [s]':>14s} {'drop-out drift [deg]':>20s} {'NEES/dof':>9s}"
+    print(head)
+    for name, m in rows:
+        rms = m["rms_error"]
+        drift = m["dropouts"][0]["heading_drift_rad"] if m.get("dropouts") else None
+        nees = m["nees"]["mean"] / m["nees"]["dof"] if m.get("nees") else None
+        print(f"{name:22s} {_fmt(rms['z']):>10s} {_fmt(rms['psi'], deg):>13s} {_fmt(rms['w']):>11s} "
+              f"{_fmt(m['settling_time_s'].get('z')):>12s} {_fmt(m['overshoot'].get('z'), 100):>10s}% "
+              f"{_fmt(m['settling_time_s'].get('psi')):>14s} {_fmt(drift, deg):>20s} {_fmt(nees):>9s}")
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from rovlab.io.report import write_report_html
+    from rovlab.sim.scenario import load_scenario_data
+
+    _check_counts(args)
+    out = Path(args.out)
+    cases = ("step-observer-model", "step-process-model", "dropout")
+    print(f"rovlab demo: the thesis case studies (Sandøy 2016, figs. 5.2-5.4) on uDrone -> {out}/")
+    sections = []
+    rows = []
+    for i, name in enumerate(cases, 1):
+        t0 = time.perf_counter()
+        print(f"[{i}/{len(cases) + 1}] {name} ...", end="", flush=True)
+        data, file = load_scenario_data(name)
+        result, metrics, notes = _run_and_write(data, file, None, out / name)
+        print(f" done in {time.perf_counter() - t0:.1f} s -> {out / name}/")
+        for n in notes:
+            print(f"  note: {n}")
+        rows.append((name, metrics))
+        figs = [out / name / f for f in ("states.png", "errors.png", "biases.png", "control.png")
+                if (out / name / f).exists()]
+        sections.append({"title": name, "description": f"{result.scenario.description}. {result.scenario.source}.",
+                         "metrics": metrics, "figures": figs,
+                         "extra": f"seed {result.scenario.seed}; details in {name}/report.html, "
+                                  f"logs in {name}/timeseries.csv and timeseries.mcap"})
+    mc_name = "step-observer-model"
+    if args.runs > 1:
+        print(f"[{len(cases) + 1}/{len(cases) + 1}] filter consistency: {args.runs} Monte Carlo runs of {mc_name}")
+        data, file = load_scenario_data(mc_name)
+        result, metrics, notes = _run_and_write(data, file, None, out / mc_name, figures=False)
+        summary = _monte_carlo(data, file, result.scenario.seed, args.runs, args.workers, "processes", None,
+                               out / mc_name, result, metrics, notes)
+        _print_mc(summary)
+        nees_png = out / mc_name / "monte_carlo" / "nees.png"
+        sections.append({"title": f"Monte Carlo: {mc_name} x {args.runs}",
+                         "description": "Average NEES over independent runs against its chi-square bounds: a "
+                                        "consistent filter keeps it inside (Bar-Shalom et al. 2001, sec. 5.4).",
+                         "metrics": {"nees": summary.get("nees"), "rms_error": {
+                             k.split(".")[1]: v["mean"] for k, v in summary["metrics"].items()
+                             if k.startswith("rms_error.")}},
+                         "figures": [nees_png] if nees_png.exists() else [],
+                         "extra": f"seeds {summary['seeds'][0]}..{summary['seeds'][-1]}; {summary['wall_time_s']:.2f} s"})
+    report = write_report_html(out / "report.html", "rovlab demo: uDrone case studies", sections,
+                               intro="Depth and heading LQG (Kalman filter + LQR) of uDrone, reproducing the "
+                                     "simulation case studies of Sandøy (2016), ch. 5, with the numbers of "
+                                     "rovlab's SPEC section 7.")
+    print()
+    _print_summary(rows)
+    print(f"\nreport: {report}")
+    return 0

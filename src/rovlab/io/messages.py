@@ -1,0 +1,90 @@
+"""The messages rovlab's loop publishes, the same for the simulator and a real vehicle's bridge.
+
+Each message is a JSON-able dict on a topic. The simulator's logs (MCAP), the HMI's live stream
+and a middleware bridge all use these builders, so a consumer cannot tell a simulated vehicle from
+a real one (a real vehicle simply has no ``/rovlab/truth``).
+
+Column naming of a time-series log (rovlab.io.timeseries) maps onto the topics:
+``true_*`` -> truth, ``est_*`` and ``var_*`` and ``status_*`` -> estimate, ``meas_*`` ->
+measurement, ``ref_*`` -> reference, ``tau_*`` and ``pwm_*`` -> command.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Iterator, Mapping
+
+import numpy as np
+
+# status codes of rovlab.estimation.fusion (STATUS_OK, STATUS_RECOVERING, STATUS_LOST, STATUS_OFF)
+SENSOR_STATUS = {0: "ok", 1: "recovering", 2: "lost", 3: "off"}
+
+_NUM = {"type": "number"}
+_MAP = {"type": "object", "additionalProperties": {"type": ["number", "null"]}}
+TOPICS: dict[str, dict[str, Any]] = {
+    "/rovlab/truth": {"type": "object", "properties": {"t": _NUM, "state": _MAP}},
+    "/rovlab/estimate": {"type": "object", "properties": {
+        "t": _NUM, "state": _MAP, "variance": _MAP,
+        "sensors": {"type": "object", "additionalProperties": {"type": "string"}}}},
+    "/rovlab/measurement": {"type": "object", "properties": {"t": _NUM, "values": _MAP}},
+    "/rovlab/reference": {"type": "object", "properties": {"t": _NUM, "state": _MAP}},
+    "/rovlab/command": {"type": "object", "properties": {"t": _NUM, "tau": _MAP, "pwm_us": _MAP}},
+}
+
+
+def _clean(value: float) -> float | None:
+    v = float(value)
+    return None if math.isnan(v) else v
+
+
+def truth_message(t: float, state: Mapping[str, float]) -> dict[str, Any]:
+    return {"t": float(t), "state": {k: _clean(v) for k, v in state.items()}}
+
+
+def estimate_message(t: float, state: Mapping[str, float], variance: Mapping[str, float],
+                     sensors: Mapping[str, str]) -> dict[str, Any]:
+    return {"t": float(t), "state": {k: _clean(v) for k, v in state.items()},
+            "variance": {k: _clean(v) for k, v in variance.items()}, "sensors": dict(sensors)}
+
+
+def measurement_message(t: float, values: Mapping[str, float]) -> dict[str, Any]:
+    """Measurements present at time t (channel -> value); absent channels are left out."""
+    return {"t": float(t), "values": {k: float(v) for k, v in values.items() if not math.isnan(float(v))}}
+
+
+def reference_message(t: float, state: Mapping[str, float]) -> dict[str, Any]:
+    return {"t": float(t), "state": {k: _clean(v) for k, v in state.items()}}
+
+
+def command_message(t: float, tau: Mapping[str, float], pwm_us: Mapping[str, float]) -> dict[str, Any]:
+    return {"t": float(t), "tau": {k: _clean(v) for k, v in tau.items()},
+            "pwm_us": {k: _clean(v) for k, v in pwm_us.items()}}
+
+
+def _group(columns: Mapping[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:
+    return {name[len(prefix):]: np.asarray(col) for name, col in columns.items() if name.startswith(prefix)}
+
+
+def row_messages(columns: Mapping[str, np.ndarray], k: int) -> Iterator[tuple[str, float, dict[str, Any]]]:
+    """The messages of row k of a time-series log."""
+    t = float(columns["time_s"][k])
+    groups = {p: _group(columns, p) for p in ("true_", "est_", "var_", "status_", "meas_", "ref_", "tau_", "pwm_")}
+    if groups["true_"]:
+        yield "/rovlab/truth", t, truth_message(t, {n: c[k] for n, c in groups["true_"].items()})
+    if groups["est_"]:
+        status = {n: SENSOR_STATUS.get(int(c[k]), "unknown") for n, c in groups["status_"].items()
+                  if not math.isnan(float(c[k]))}
+        yield "/rovlab/estimate", t, estimate_message(
+            t, {n: c[k] for n, c in groups["est_"].items()}, {n: c[k] for n, c in groups["var_"].items()}, status)
+    if groups["meas_"]:
+        yield "/rovlab/measurement", t, measurement_message(t, {n: c[k] for n, c in groups["meas_"].items()})
+    if groups["ref_"]:
+        yield "/rovlab/reference", t, reference_message(t, {n: c[k] for n, c in groups["ref_"].items()})
+    if groups["tau_"] or groups["pwm_"]:
+        yield "/rovlab/command", t, command_message(t, {n: c[k] for n, c in groups["tau_"].items()},
+                                                    {n: c[k] for n, c in groups["pwm_"].items()})
+
+
+def rows_to_messages(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, float, dict[str, Any]]]:
+    for k in range(len(columns["time_s"])):
+        yield from row_messages(columns, k)

@@ -1,0 +1,275 @@
+"""Figures (PNG) and an HTML report for a closed-loop run, laid out like the thesis's figures 5.2-5.4:
+per state the truth, the measurements and the estimate; the bias estimates; the velocities; the
+control forces and thruster commands; drop-out windows shaded.
+
+matplotlib is an optional extra (``pip install 'rovlab[plot]'``) imported only here. The HTML
+report embeds the PNGs as data URIs, so it is one self-contained file that works offline.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+_DEG = 180.0 / math.pi
+
+
+def _plt():
+    try:
+        import matplotlib
+    except ImportError as exc:  # pragma: no cover - optional extra
+        raise RuntimeError("figures need matplotlib: pip install 'rovlab[plot]'") from exc
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _shade(ax, windows: Sequence[tuple[float, float, str]]) -> None:
+    for start, end, label in windows:
+        ax.axvspan(start, end, color="0.85", zorder=0, label=f"{label} lost" if label else None)
+
+
+def _col(columns: Mapping[str, np.ndarray], name: str) -> np.ndarray | None:
+    return np.asarray(columns[name], dtype=float) if name in columns else None
+
+
+def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> list[Path]:
+    """Write the run's figures into out_dir; returns their paths."""
+    plt = _plt()
+    out = Path(out_dir)
+    t = np.asarray(columns["time_s"], dtype=float)
+    windows = [(d["start_s"], d["end_s"], d["sensor"]) for d in meta.get("dropouts", [])]
+    title = meta.get("title", "")
+    paths = []
+
+    # 1. states: truth, measurements, estimate (+-2 sigma)
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
+    specs = [("z", "depth z [m]", 1.0), ("psi", "heading psi [deg]", _DEG), ("w", "heave velocity w [m/s]", 1.0),
+             ("r", "yaw rate r [deg/s]", _DEG)]
+    for ax, (s, label, k) in zip(axes.ravel(), specs):
+        _shade(ax, windows)
+        true = _col(columns, f"true_{s}")
+        if true is not None:
+            ax.plot(t, true * k, color="k", lw=1.2, label="truth")
+        for name in columns:
+            if name.startswith(f"meas_{s}_"):
+                m = _col(columns, name)
+                ok = np.isfinite(m)
+                ax.plot(t[ok], m[ok] * k, ".", ms=2, alpha=0.5, label=f"measured ({name[len(f'meas_{s}_'):]})")
+        est = _col(columns, f"est_{s}")
+        var = _col(columns, f"var_{s}")
+        if est is not None:
+            ax.plot(t, est * k, color="tab:red", lw=1.0, label="estimate")
+            if var is not None:
+                sd = 2 * np.sqrt(np.maximum(var, 0))
+                ax.fill_between(t, (est - sd) * k, (est + sd) * k, color="tab:red", alpha=0.15, lw=0,
+                                label="estimate +-2 sigma")
+        ref = _col(columns, f"ref_{s}")
+        if ref is not None:
+            ax.plot(t, ref * k, "--", color="tab:green", lw=1.0, label="reference")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    fig.suptitle(f"{title}: states".strip(": "))
+    fig.tight_layout()
+    paths.append(_save(fig, out / "states.png", plt))
+
+    # 2. estimation errors with the filter's own +-2 sigma
+    fig, axes = plt.subplots(2, 2, figsize=(12, 6), sharex=True)
+    for ax, (s, label, k) in zip(axes.ravel(), specs):
+        _shade(ax, windows)
+        true, est, var = _col(columns, f"true_{s}"), _col(columns, f"est_{s}"), _col(columns, f"var_{s}")
+        if true is None or est is None:
+            ax.set_visible(False)
+            continue
+        err = est - true
+        if s == "psi":
+            err = np.pi - np.mod(np.pi - err, 2 * np.pi)
+        ax.plot(t, err * k, color="tab:red", lw=1.0, label="estimate - truth")
+        if var is not None:
+            sd = 2 * np.sqrt(np.maximum(var, 0)) * k
+            ax.plot(t, sd, color="0.4", lw=0.8, ls="--", label="+-2 sigma (filter)")
+            ax.plot(t, -sd, color="0.4", lw=0.8, ls="--")
+        ax.set_ylabel(f"error in {label}")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    fig.suptitle(f"{title}: estimation error".strip(": "))
+    fig.tight_layout()
+    paths.append(_save(fig, out / "errors.png", plt))
+
+    # 3. biases
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.5), sharex=True)
+    for ax, (s, label) in zip(axes, [("b_w", "heave bias b_w [N]"), ("b_r", "yaw bias b_r [N m]")]):
+        _shade(ax, windows)
+        true = _col(columns, f"true_{s}")
+        if true is not None:
+            ax.plot(t, true, color="k", lw=1.2, label="truth")
+        est, var = _col(columns, f"est_{s}"), _col(columns, f"var_{s}")
+        if est is not None:
+            ax.plot(t, est, color="tab:red", lw=1.0, label="estimate")
+            if var is not None:
+                sd = 2 * np.sqrt(np.maximum(var, 0))
+                ax.fill_between(t, est - sd, est + sd, color="tab:red", alpha=0.15, lw=0)
+        ax.set_ylabel(label)
+        ax.set_xlabel("time [s]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{title}: bias estimates".strip(": "))
+    fig.tight_layout()
+    paths.append(_save(fig, out / "biases.png", plt))
+
+    # 4. control forces and thruster commands
+    fig, axes = plt.subplots(2, 1, figsize=(12, 6), sharex=True)
+    _shade(axes[0], windows)
+    for s, unit in (("Z", "N"), ("N", "N m")):
+        c = _col(columns, f"tau_{s}")
+        if c is not None:
+            axes[0].plot(t, c, lw=1.0, label=f"tau_{s} [{unit}]")
+    axes[0].set_ylabel("control force")
+    axes[0].grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    _shade(axes[1], windows)
+    for name in columns:
+        if name.startswith("pwm_"):
+            axes[1].step(t, _col(columns, name), where="post", lw=0.9, label=name[4:])
+    axes[1].set_ylabel("thruster command [us]")
+    axes[1].set_xlabel("time [s]")
+    axes[1].grid(alpha=0.3)
+    axes[1].legend(fontsize=7, ncol=4)
+    fig.suptitle(f"{title}: control".strip(": "))
+    fig.tight_layout()
+    paths.append(_save(fig, out / "control.png", plt))
+    return paths
+
+
+def write_nees_figure(path: str | Path, t: np.ndarray, nees_runs: np.ndarray, bounds: Sequence[float],
+                      dof: int, title: str = "") -> Path:
+    """Average NEES over Monte Carlo runs against its chi-square bounds."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(10, 3.5))
+    mean = np.nanmean(nees_runs, axis=0)
+    ax.plot(t, mean, lw=1.0, label=f"average NEES over {nees_runs.shape[0]} runs")
+    ax.axhline(dof, color="k", lw=0.8, label=f"expected ({dof})")
+    ax.axhline(bounds[0], color="tab:red", ls="--", lw=0.8, label="95 % chi-square bounds")
+    ax.axhline(bounds[1], color="tab:red", ls="--", lw=0.8)
+    ax.set_yscale("log")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("NEES")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title(title)
+    fig.tight_layout()
+    return _save(fig, Path(path), plt)
+
+
+def _save(fig, path: Path, plt) -> Path:
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# HTML
+# --------------------------------------------------------------------------------------------
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em;max-width:1300px;color:#222}
+h1{font-size:1.5em} h2{font-size:1.2em;margin-top:2em;border-bottom:1px solid #ccc}
+table{border-collapse:collapse;margin:1em 0;font-size:.9em} td,th{border:1px solid #ccc;padding:.3em .6em;text-align:right}
+th{background:#f3f3f3} td:first-child,th:first-child{text-align:left}
+img{max-width:100%;border:1px solid #eee;margin:.5em 0} .muted{color:#666;font-size:.9em}
+pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:.8em}
+"""
+
+
+def _img(path: Path) -> str:
+    data = base64.b64encode(Path(path).read_bytes()).decode()
+    return f'<img alt="{html.escape(path.stem)}" src="data:image/png;base64,{data}">'
+
+
+def _fmt(v: Any, digits: int = 4) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, (int, float)):
+        if isinstance(v, float) and not math.isfinite(v):
+            return "–"
+        return f"{v:.{digits}g}"
+    return html.escape(str(v))
+
+
+def summary_rows(metrics: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """(label, value) rows of the headline numbers of one run's metrics."""
+    rows: list[tuple[str, str]] = []
+    rms = metrics.get("rms_error", {})
+    for s, unit, k in (("z", "m", 1.0), ("psi", "deg", _DEG), ("w", "m/s", 1.0), ("r", "deg/s", _DEG)):
+        if s in rms:
+            rows.append((f"RMS estimation error {s} [{unit}]", _fmt(rms[s] * k)))
+    for axis, unit, k in (("z", "s", 1.0), ("psi", "s", 1.0)):
+        st = metrics.get("settling_time_s", {}).get(axis)
+        rows.append((f"settling time {axis} [{unit}] (2 %)", _fmt(st)))
+    for axis in ("z", "psi"):
+        ov = metrics.get("overshoot", {}).get(axis)
+        rows.append((f"overshoot {axis} [%]", _fmt(None if ov is None else 100 * ov, 3)))
+    for d in metrics.get("dropouts", []):
+        rows.append((f"heading drift during {d['sensor']} drop-out [deg]", _fmt(d["heading_drift_rad"] * _DEG)))
+        rows.append((f"max heading error during drop-out [deg]", _fmt(d["heading_error_max_rad"] * _DEG)))
+        rows.append((f"depth error RMS during / before drop-out [m]",
+                     f"{_fmt(d['depth_error_rms_during'])} / {_fmt(d['depth_error_rms_before'])}"))
+    nees = metrics.get("nees")
+    if nees:
+        rows.append((f"average NEES ({nees['dof']} states; expected {nees['dof']})",
+                     f"{_fmt(nees['mean'])} (95 % bounds {_fmt(nees['mean_bounds'][0])}–{_fmt(nees['mean_bounds'][1])})"))
+    nis = metrics.get("nis")
+    if nis:
+        rows.append(("average NIS per measurement (expected 1)", _fmt(nis["mean"])))
+    return rows
+
+
+def write_report_html(path: str | Path, title: str, sections: Sequence[Mapping[str, Any]],
+                      intro: str = "") -> Path:
+    """One self-contained page. Each section: title, description, metrics, figures (paths), extra."""
+    parts = [f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+             f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"]
+    if intro:
+        parts.append(f"<p>{html.escape(intro)}</p>")
+    if len(sections) > 1:
+        labels = sorted({lbl for s in sections for lbl, _ in summary_rows(s["metrics"])},
+                        key=lambda lbl: [r for r, _ in summary_rows(sections[0]["metrics"])].index(lbl)
+                        if lbl in [r for r, _ in summary_rows(sections[0]["metrics"])] else 99)
+        table = {s["title"]: dict(summary_rows(s["metrics"])) for s in sections}
+        parts.append("<h2>Summary</h2><table><tr><th></th>" + "".join(f"<th>{html.escape(s['title'])}</th>"
+                                                                       for s in sections) + "</tr>")
+        for lbl in labels:
+            parts.append(f"<tr><td>{html.escape(lbl)}</td>" + "".join(
+                f"<td>{table[s['title']].get(lbl, '–')}</td>" for s in sections) + "</tr>")
+        parts.append("</table>")
+    for s in sections:
+        parts.append(f"<h2 id='{html.escape(s['title'])}'>{html.escape(s['title'])}</h2>")
+        if s.get("description"):
+            parts.append(f"<p>{html.escape(s['description'])}</p>")
+        parts.append("<table><tr><th>metric</th><th>value</th></tr>" + "".join(
+            f"<tr><td>{html.escape(lbl)}</td><td>{val}</td></tr>" for lbl, val in summary_rows(s["metrics"]))
+            + "</table>")
+        if s.get("extra"):
+            parts.append(f"<p class='muted'>{html.escape(s['extra'])}</p>")
+        for fig in s.get("figures", []):
+            parts.append(_img(Path(fig)))
+        parts.append("<details><summary>all metrics (metrics.json)</summary><pre>"
+                     + html.escape(json.dumps(s["metrics"], indent=2)) + "</pre></details>")
+    parts.append("</body></html>")
+    path = Path(path)
+    path.write_text("".join(parts), encoding="utf-8")
+    return path

@@ -1,0 +1,157 @@
+"""Monte Carlo: one scenario run many times with independent seeds, in parallel.
+
+Run i uses seed ``base_seed + i``; its distributions and all its noise are drawn from that seed
+alone, so ``rovlab simulate SCENARIO --seed S`` replays any run. Runs go to a pool of forked
+worker processes (stdlib ``concurrent.futures``; the compiled loop is warmed up in the parent
+first, so forked workers start with it ready) or, with ``backend="dask"``, to a Dask cluster.
+Workers return only the metrics and the NEES/NIS series, not the full logs.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from rovlab.sim import metrics as mx
+
+
+def _one_run(data: Mapping[str, Any], file: str, seed: int) -> dict[str, Any]:
+    from rovlab.sim.runner import prepare, run_prepared, summarise
+
+    prepared = prepare(data, file=file, seed=seed)
+    result = run_prepared(prepared)
+    m = summarise(result)
+    return {"seed": seed, "metrics": m, "nees": result.nees, "nis": result.nis}
+
+
+def _chunk(data: Mapping[str, Any], file: str, seeds: Sequence[int]) -> list[dict[str, Any]]:
+    return [_one_run(data, file, s) for s in seeds]
+
+
+def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, workers: int | None = None,
+             backend: str = "processes", scheduler: str | None = None,
+             progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
+    """Run the scenario once per seed; results in seed order."""
+    seeds = list(seeds)
+    workers = max(1, workers or os.cpu_count() or 1)
+    if workers > 1 and backend == "processes":
+        _one_run(data, file, seeds[0])  # compile/load the loop here once; forked workers inherit it
+    if backend == "dask":
+        return _run_dask(data, file, seeds, scheduler, progress)
+    if backend != "processes":
+        raise ValueError(f"unknown Monte Carlo backend {backend!r}; expected 'processes' or 'dask'")
+    n = len(seeds)
+    if workers == 1 or n == 1:
+        out = []
+        for i, s in enumerate(seeds):
+            out.append(_one_run(data, file, s))
+            if progress:
+                progress(i + 1, n)
+        return out
+    size = max(1, min(50, n // (workers * 4) or 1))
+    chunks = [seeds[i:i + size] for i in range(0, n, size)]
+    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
+    results: dict[int, dict[str, Any]] = {}
+    done = 0
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    try:
+        futures = [pool.submit(_chunk, data, file, c) for c in chunks]
+        for fut in as_completed(futures):
+            for r in fut.result():
+                results[r["seed"]] = r
+                done += 1
+            if progress:
+                progress(done, n)
+    except KeyboardInterrupt:
+        # keep what finished: the caller writes the partial statistics
+        for fut in futures:
+            fut.cancel()
+        pool.shutdown(wait=False, cancel_futures=True)
+        print(f"\ninterrupted: keeping {done} of {n} runs", file=sys.stderr)
+        return [results[s] for s in seeds if s in results]
+    pool.shutdown()
+    return [results[s] for s in seeds]
+
+
+def _run_dask(data, file, seeds, scheduler, progress):
+    try:
+        from dask.distributed import Client, as_completed
+    except ImportError as exc:  # pragma: no cover - optional extra
+        raise RuntimeError("the Dask backend needs dask[distributed]: pip install 'rovlab[dask]'") from exc
+    client = Client(scheduler) if scheduler else Client(processes=True)
+    try:
+        futures = [client.submit(_one_run, data, file, s, pure=False) for s in seeds]
+        out = {}
+        for i, fut in enumerate(as_completed(futures)):
+            r = fut.result()
+            out[r["seed"]] = r
+            if progress:
+                progress(i + 1, len(seeds))
+        return [out[s] for s in seeds]
+    finally:
+        client.close()
+
+
+def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Spread of every numeric metric over the runs, and the Monte Carlo NEES/NIS consistency."""
+    flat = [_flatten(r["metrics"]) for r in runs]
+    keys = sorted({k for f in flat for k in f})
+    stats: dict[str, Any] = {}
+    for k in keys:
+        vals = np.array([f.get(k, np.nan) for f in flat], dtype=float)
+        ok = vals[np.isfinite(vals)]
+        if ok.size == 0:
+            stats[k] = {"count": 0}
+            continue
+        stats[k] = {"count": int(ok.size), "mean": float(ok.mean()), "std": float(ok.std(ddof=1)) if ok.size > 1 else 0.0,
+                    "min": float(ok.min()), "p5": float(np.percentile(ok, 5)), "median": float(np.median(ok)),
+                    "p95": float(np.percentile(ok, 95)), "max": float(ok.max())}
+    out: dict[str, Any] = {"runs": len(runs), "seeds": [int(r["seed"]) for r in runs], "metrics": stats}
+    nees = np.array([r["nees"] for r in runs], dtype=float)
+    if nees.size:
+        dof = int(runs[0]["metrics"]["nees"]["dof"])
+        out["nees"] = mx.consistency(nees, dof)
+    nis = np.array([r["nis"] for r in runs], dtype=float)
+    if nis.size:
+        out["nis"] = mx.consistency(nis, 1)
+    return out
+
+
+def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
+    out: dict[str, float] = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(_flatten(v, key + "."))
+        elif isinstance(v, bool):
+            out[key] = float(v)
+        elif isinstance(v, (int, float)):
+            out[key] = float(v)
+        elif isinstance(v, list) and v and all(isinstance(x, Mapping) for x in v):
+            for i, x in enumerate(v):
+                out.update(_flatten(x, f"{key}[{i}]."))
+    return out
+
+
+class Progress:
+    """A one-line progress bar on stderr (no dependency)."""
+
+    def __init__(self, label: str, stream=sys.stderr) -> None:
+        self.label = label
+        self.stream = stream
+        self.t0 = time.perf_counter()
+
+    def __call__(self, done: int, total: int) -> None:
+        width = 30
+        fill = int(width * done / max(total, 1))
+        dt = time.perf_counter() - self.t0
+        self.stream.write(f"\r{self.label} [{'#' * fill}{'.' * (width - fill)}] {done}/{total} runs  {dt:5.1f} s")
+        if done >= total:
+            self.stream.write("\n")
+        self.stream.flush()

@@ -1,0 +1,107 @@
+"""Writing a run's results into a folder: timeseries.csv, timeseries.mcap, metrics.json, the PNG
+figures and report.html. Whatever was computed is written even if a later step fails (a missing
+optional extra such as matplotlib only skips the figures, with a note)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from rovlab.io.report import write_figures, write_nees_figure, write_report_html
+from rovlab.io.timeseries import write_csv, write_mcap
+from rovlab.sim.runner import SimResult
+
+# the columns of the timeseries.csv contract come first, in this order
+CONTRACT = ("time_s", "true_z", "true_psi", "true_w", "true_r", "est_z", "est_psi", "est_w", "est_r",
+            "est_b_w", "est_b_r")
+
+
+def ordered_columns(result: SimResult) -> dict[str, np.ndarray]:
+    c = result.columns
+    first = [k for k in CONTRACT if k in c]
+    meas = [k for k in c if k.startswith("meas_")]
+    rest_contract = ["ref_z", "ref_psi", "tau_Z", "tau_N"] + [k for k in c if k.startswith("pwm_")]
+    others = [k for k in c if k not in first + meas + rest_contract]
+    return {k: c[k] for k in first + meas + rest_contract + others}
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o))
+
+
+def _clean(o: Any) -> Any:
+    """NaN/inf -> None so that metrics.json is strict JSON."""
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    return o
+
+
+def write_json(path: Path, data: Mapping[str, Any]) -> Path:
+    path.write_text(json.dumps(_clean(json.loads(json.dumps(data, default=_json_default))), indent=2) + "\n",
+                    encoding="utf-8")
+    return path
+
+
+def write_run(out_dir: str | Path, result: SimResult, metrics: Mapping[str, Any], *, figures: bool = True,
+              mcap: bool = True, report: bool = True, notes: list[str] | None = None) -> dict[str, Path]:
+    """Write one run's files; returns name -> path of what was written."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written: dict[str, Path] = {}
+    notes = notes if notes is not None else []
+    cols = ordered_columns(result)
+    written["timeseries.csv"] = write_csv(out / "timeseries.csv", cols)
+    written["metrics.json"] = write_json(out / "metrics.json", metrics)
+    if mcap:
+        try:
+            written["timeseries.mcap"] = write_mcap(out / "timeseries.mcap", cols, metadata={
+                "scenario": result.scenario.name, "seed": str(result.scenario.seed)})
+        except RuntimeError as exc:
+            notes.append(str(exc))
+    figs: list[Path] = []
+    if figures:
+        try:
+            figs = write_figures(out, cols, result.meta)
+            for f in figs:
+                written[f.name] = f
+        except RuntimeError as exc:
+            notes.append(str(exc))
+    if report:
+        written["report.html"] = write_report_html(out / "report.html", f"rovlab: {result.scenario.name}", [
+            {"title": result.scenario.name, "description": result.scenario.description + " — " + result.scenario.source,
+             "metrics": metrics, "figures": figs,
+             "extra": f"seed {result.scenario.seed}; plant: {result.scenario.plant}; vehicle {result.meta['vehicle']}; "
+                      f"filter/controller configuration {result.meta['design']}"}])
+    return written
+
+
+def write_monte_carlo(out_dir: str | Path, scenario_name: str, summary: Mapping[str, Any],
+                      runs: Sequence[Mapping[str, Any]], t: np.ndarray, description: str = "",
+                      notes: list[str] | None = None) -> dict[str, Path]:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = {"metrics.json": write_json(out / "metrics.json", {"monte_carlo": summary})}
+    notes = notes if notes is not None else []
+    figs = []
+    try:
+        nees = np.array([r["nees"] for r in runs], dtype=float)
+        if "nees" in summary:
+            dof = summary["nees"]["dof"]
+            figs.append(write_nees_figure(out / "nees.png", t, nees, summary["nees"]["bounds_per_step"], dof,
+                                          f"{scenario_name}: filter consistency over {len(runs)} runs"))
+    except RuntimeError as exc:
+        notes.append(str(exc))
+    written.update({f.name: f for f in figs})
+    return written
