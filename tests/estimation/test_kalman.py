@@ -391,3 +391,35 @@ def test_kernel_api_for_compiled_callers(filt, thesis_model):
         kf_step(filt.packed, x, P, ch, t[k], u[k], y[k], ~np.isnan(y[k]), xc, Pc, rep, work)
         np.testing.assert_array_equal(xc, run.x[k])
     assert rep[0, REP_R] == filt.cfg[0, CFG_R]
+
+
+def test_correct_and_predict_separately_equal_step(filt, thesis_model):
+    t, u, y, _ = simulate(thesis_model, 10, seed=18)
+    b = filt.initial_belief(P0=np.eye(6) * 1e-3)
+    for k in range(10):
+        nxt, rep = filt.step(b, t[k], u[k], y[k])
+        corrected, rep_c = filt.correct(b, t[k], y[k])
+        np.testing.assert_array_equal(corrected.x, rep.x)
+        np.testing.assert_array_equal(rep_c.P, rep.P)
+        assert rep_c.status == rep.status
+        np.testing.assert_array_equal(filt.predict(corrected, u[k]).x, nxt.x)
+        b = nxt
+
+
+def test_scalar_joseph_update_kernel_against_numpy():
+    from rovlab.estimation.kalman import kf_update_scalar
+
+    rng = np.random.default_rng(19)
+    A = rng.standard_normal((6, 6))
+    P = A @ A.T + np.eye(6)
+    x = rng.standard_normal(6)
+    h = np.array([0.5, 0.0, 1.0, 0.0, 0.0, -0.2])  # a general row
+    r, value = 0.3, 1.7
+    k = P @ h / (h @ P @ h + r)
+    I_kh = np.eye(6) - np.outer(k, h)
+    P_ref = I_kh @ P @ I_kh.T + r * np.outer(k, k)
+    x_ref = x + k * (value - h @ x)
+    x1, P1 = x.copy(), P.copy()
+    kf_update_scalar(x1, P1, h, value, r, False, np.zeros(6), kf_workspace(6, 1))
+    np.testing.assert_allclose(x1, x_ref, rtol=1e-12)
+    np.testing.assert_allclose(P1, P_ref, rtol=1e-11, atol=1e-14)

@@ -133,9 +133,10 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     n_predict, bad = steps_between(t, model.h)
     if bad is not None:
         dt = float(t[bad] - t[bad - 1])
-        raise ConfigError([Problem(log.file, log.where(bad, "time_s"), round(dt, 9),
-                                   f"a time step of a whole number of filter sample times h = {model.h:g} s "
-                                   f"(within 25%; the previous row is line {int(log.lines[bad - 1])})")], "log")
+        raise ConfigError([Problem(log.file, log.where(bad, "time_s"),
+                                   f"a step of {dt:.6g} s after line {int(log.lines[bad - 1])}",
+                                   f"a whole number of filter sample times h = {model.h:g} s (within 25%)")],
+                          "log")
     u = np.column_stack([log[c] for c in INPUT_COLUMNS])
     y = np.column_stack([log[c] for c in columns])
     run = filt.run(t, u, y, n_predict=n_predict)
@@ -150,7 +151,7 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     comments = [f"rovlab filter {args.log}: vehicle {vehicle.name}, configuration {config.name}, "
                 f"h = {model.h:g} s", "units: SI (m, rad, m/s, rad/s, N, N m); var_* are the variances"]
     try:
-        write_csv(args.out, out, comments=comments)
+        write_csv(args.out, out, comments=comments, float_format="%.10g")
     except OSError as exc:
         raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
 

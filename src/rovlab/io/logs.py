@@ -164,8 +164,8 @@ def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
                 values[r, c] = x
         if len(problems) >= _MAX_PROBLEMS:
             break
-    if not problems:
-        t = values[:, it]
+    if len(problems) < _MAX_PROBLEMS:
+        t = values[:, it]  # NaN where the time itself was bad (already reported)
         for r in np.flatnonzero(np.diff(t) <= 0) + 1:
             what = "repeats" if t[r] == t[r - 1] else "goes back from"
             problems.append(Problem(file, f"line {row_lines[r]}, column {time_column!r}", float(t[r]),
