@@ -7,6 +7,7 @@ Pure functions of logged arrays; angles are wrapped before differences are taken
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, Sequence
 
@@ -61,16 +62,29 @@ def step_response(t: np.ndarray, y: np.ndarray, t_step: float, y0: float, y1: fl
 
 
 def nees(err: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """e_k^T P_k^-1 e_k per row (P: (K, n, n)); NaN where P is singular."""
+    """e_k^T P_k^-1 e_k per row (P: (K, n, n)); NaN where P is singular (e.g. P0 = 0)."""
+    err = np.asarray(err, dtype=float)
+    P = np.asarray(P, dtype=float)
     out = np.full(err.shape[0], np.nan)
-    for k in range(err.shape[0]):
+    # Cholesky of every covariance at once; rows that are not positive definite stay NaN
+    diag = np.einsum("kii->ki", P)
+    ok = np.all(diag > 0, axis=1) & np.all(np.isfinite(P), axis=(1, 2)) & np.all(np.isfinite(err), axis=1)
+    idx = np.flatnonzero(ok)
+    if idx.size:
         try:
-            out[k] = err[k] @ np.linalg.solve(P[k], err[k])
+            L = np.linalg.cholesky(P[idx])
+            z = np.linalg.solve(L, err[idx][..., None])[..., 0]
+            out[idx] = np.sum(z * z, axis=1)
         except np.linalg.LinAlgError:
-            pass
+            for k in idx:
+                try:
+                    out[k] = err[k] @ np.linalg.solve(P[k], err[k])
+                except np.linalg.LinAlgError:
+                    pass
     return out
 
 
+@functools.lru_cache(maxsize=256)
 def chi2_interval(dof: float, runs: int = 1, probability: float = 0.95) -> tuple[float, float]:
     """Two-sided bounds of the average of `runs` independent chi-square(dof) variables."""
     a = (1 - probability) / 2

@@ -216,7 +216,8 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     sc = data if isinstance(data, Scenario) else scenario_from_dict(data, file=file, seed=seed)
     vehicle = vehicle if vehicle is not None else _load_ref(sc, "vehicle", load_vehicle)
     config = config if config is not None else _load_ref(sc, "design", load_design_config)
-    fm = build_filter_model(vehicle, config)
+    design = _design(vehicle, config, sc.plant, sc.plant_step_s)
+    fm, K, Pref, allocator = design.fm, design.K, design.Pref, design.allocator
     h = fm.h
     n_sub = int(round(h / sc.plant_step_s))
     if n_sub < 1 or abs(n_sub * sc.plant_step_s - h) > 1e-9 * h:
@@ -224,9 +225,7 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
                                    f"a step that divides the filter's sample time {h:g} s")], "scenario file")
     n_ctrl = int(math.floor(sc.duration_s / h + 1e-9)) + 1
     truth = truth if truth is not None else _truth_vehicle(vehicle, sc)
-    K, Pref = lqr_gains(vehicle, config)
-    allocator = Allocator(vehicle)
-    bank = ThrusterBank.from_vehicle(truth)
+    bank = allocator.bank if truth.thrusters is vehicle.thrusters else ThrusterBank.from_vehicle(truth)
     rng = np.random.default_rng(sc.seed)
 
     # channels: which true quantity, lever arm, noise (the vehicle's true sensor variance), period
@@ -254,9 +253,8 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
             dropout[window, j] = True
     if problems:
         raise ConfigError(problems, "scenario file")
-    refs = np.empty((n_ctrl, 2))
-    for k, t in enumerate(times):
-        refs[k] = sc.reference_at(t)
+    idx = np.maximum(np.searchsorted(sc.reference_times, times, side="right") - 1, 0)
+    refs = np.column_stack([sc.reference_z[idx], sc.reference_psi[idx]])
 
     # plant
     p_truth = kin.pack(truth)
@@ -265,20 +263,18 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     noise_std = np.sqrt(sc.process_noise_psd / sc.plant_step_s)
     bias_phi, bias_std = gauss_markov_coefficients(sc.bias_std**2, 1.0 / sc.bias_time_constant_s, h)
     bias = sc.bias_std * rng.standard_normal(4)  # start in the stationary distribution
+    Phi_p, Delta_p, L_p = design.Phi_p, design.Delta_p, design.L_p
     if sc.plant == "observer":
-        disc = discretise(fm.A, fm.B, fm.E, fm.W, sc.plant_step_s)
-        Phi_p, Delta_p, L_p = disc.Phi, disc.Delta, psd_factor(disc.Q)
         plant_normals = np.zeros((0, 4))
         obs_normals = rng.standard_normal((n_ctrl * n_sub, 6))
     else:
-        Phi_p, Delta_p, L_p = np.eye(6), np.zeros((6, 2)), np.zeros((6, 6))
         plant_normals = rng.standard_normal((n_ctrl * n_sub, 4))
         obs_normals = np.zeros((0, 6))
     xo = np.array([sc.initial[2], sc.initial[3], sc.initial[6], sc.initial[7], 0.0, 0.0])
     bias_normals = rng.standard_normal((n_ctrl, 4))
     sensor_normals = rng.standard_normal((n_ctrl, m))
 
-    fmodel = pack_model(fm.Phi, fm.Delta, fm.Q, fm.H, fm.channel_config(), fm.wrap_states())
+    fmodel = design.fmodel
     arrays = dict(
         n_ctrl=n_ctrl, h=h, n_sub=n_sub, h_plant=sc.plant_step_s,
         plant_kind=PLANT_PROCESS if sc.plant == "process" else PLANT_OBSERVER,
@@ -296,10 +292,69 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     return Prepared(sc, vehicle, truth, config, fm, K, Pref, allocator, arrays)
 
 
+@dataclass(frozen=True, eq=False)
+class _Design:
+    """What depends only on the vehicle, the configuration and the plant step (shared by runs)."""
+
+    vehicle: Vehicle
+    config: DesignConfig
+    fm: FilterModel
+    K: np.ndarray
+    Pref: np.ndarray
+    allocator: Allocator
+    fmodel: np.ndarray
+    Phi_p: np.ndarray
+    Delta_p: np.ndarray
+    L_p: np.ndarray
+
+
+_DESIGNS: dict[tuple, _Design] = {}
+
+
+def _design(vehicle: Vehicle, config: DesignConfig, plant: str, plant_step: float) -> _Design:
+    """Filter model, LQR gains, allocator and the observer plant's discretisation, cached per
+    (vehicle, configuration, plant) objects: Monte Carlo runs share them (they are immutable)."""
+    key = (id(vehicle), id(config), plant, plant_step)
+    hit = _DESIGNS.get(key)
+    if hit is not None and hit.vehicle is vehicle and hit.config is config:
+        return hit
+    fm = build_filter_model(vehicle, config)
+    K, Pref = lqr_gains(vehicle, config)
+    if plant == "observer":
+        disc = discretise(fm.A, fm.B, fm.E, fm.W, plant_step)
+        Phi_p, Delta_p, L_p = disc.Phi, disc.Delta, psd_factor(disc.Q)
+    else:
+        Phi_p, Delta_p, L_p = np.eye(6), np.zeros((6, 2)), np.zeros((6, 6))
+    fmodel = pack_model(fm.Phi, fm.Delta, fm.Q, fm.H, fm.channel_config(), fm.wrap_states())
+    d = _Design(vehicle, config, fm, K, Pref, Allocator(vehicle), fmodel, np.ascontiguousarray(Phi_p),
+                np.ascontiguousarray(Delta_p), np.ascontiguousarray(L_p))
+    if len(_DESIGNS) > 32:
+        _DESIGNS.clear()
+    _DESIGNS[key] = d
+    return d
+
+
+_FILES: dict[tuple, Any] = {}
+
+
+def _load_cached(loader, ref: str):
+    """Load a vehicle/configuration once per (file, modification time)."""
+    from pathlib import Path
+
+    path = Path(ref)
+    stamp = path.stat().st_mtime_ns if path.exists() else None
+    key = (loader.__name__, ref, stamp)
+    if key not in _FILES:
+        if len(_FILES) > 64:
+            _FILES.clear()
+        _FILES[key] = loader(ref)
+    return _FILES[key]
+
+
 def _load_ref(sc: Scenario, key: str, loader):
     ref = getattr(sc, key)
     try:
-        return loader(ref)
+        return _load_cached(loader, ref)
     except ConfigError as exc:
         # say which scenario key pointed there
         raise ConfigError([Problem(sc.file, key, ref, f"a loadable {key}: {p}") for p in exc.problems],
