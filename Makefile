@@ -20,6 +20,7 @@ demo: $(STAMP)
 	$(BIN)/rovlab allocate --wrench 0 0 10 0
 
 test: $(STAMP)
+	./scripts/ensure-chromium.sh
 	$(BIN)/python -m pytest -q
 
 test-slow: $(STAMP)
