@@ -254,6 +254,30 @@ def test_chi2_gate_declares_a_sensor_lost_and_reacquires_it(filt, thesis_model):
     assert 202 < psi.index("recovering", 202) <= k_back
 
 
+def test_sensors_that_agree_with_each_other_overrule_a_wrong_prediction(filt, thesis_model):
+    """Consensus rule: the thesis design starts from P0 = 0 and knows nothing of uDrone's 6.7 N net
+    buoyancy (SPEC section 2). Both depth sensors then disagree with the overconfident prediction
+    but agree with each other: they must be used, not gated out into dead reckoning."""
+    n = 100
+    t = np.arange(n) * thesis_model.h
+    u = np.zeros((n, 2))
+    rng = np.random.default_rng(5)
+    disturbed = np.array([0.0, 0.0, 0.0, 0.0, -6.7, 0.0])  # an unmodelled upward force, as a bias state
+    x = thesis_model.x0 + disturbed
+    X = np.empty((n, 6))
+    for k in range(n):
+        X[k] = x
+        x = thesis_model.Phi @ x + thesis_model.Delta @ u[k]
+    y = X @ thesis_model.H.T + rng.standard_normal((n, 3)) * np.sqrt(np.diag(thesis_model.R))
+    y += np.array([c.offset for c in thesis_model.channels])
+    run = filt.run(t, u, y)
+    # the pressure channel (1) is never rejected, and depth is tracked to within a few cm while
+    # the bias converges (dead reckoning on the wrong model would drift by decimetres)
+    assert not np.any(run.event[:, 1] == 2)
+    assert np.max(np.abs(run.x[:, 0] - X[:, 0])) < 0.05
+    assert abs(run.x[-1, 4] - (-6.7)) < 1.5
+
+
 def test_reacquire_after_persistent_disagreement(filt, thesis_model):
     # Qualisys z re-zeroed by 20 cm while pressure holds the depth estimate (its variance stays
     # small, so even the widened gate keeps failing): re-admitted after reacquire_after_s.

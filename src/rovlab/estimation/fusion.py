@@ -15,6 +15,14 @@ variance R_j and its own management state. At each sample the compiled kernel
   (event REJECTED); ``lose_after`` consecutive failures declare the channel LOST (reason GATE).
   Gating is done against the prior of the whole sample, so its outcome does not depend on the
   order of the channels.
+* **consensus**: a sample that fails the gate is used anyway when another channel of the same
+  state also fails it and the two samples agree with each other within the gate (chi-square on
+  their difference, variance R_i + R_j). Two independent sensors that agree with each other but
+  not with the prediction mean the prediction is wrong -- an overconfident prior (P0 = 0 in the
+  thesis design) or an unmodelled force such as uDrone's 6.7 N of buoyancy before the bias has
+  converged -- and rejecting them would leave the filter dead-reckoning on the wrong model.
+  Both samples must still pass the gate with R widened 1e4 times (as a returning sensor is
+  tested), so two sensors reporting the same absurd value do not overrule the model.
 * **recovery with a transitional variance**: a LOST channel whose sample passes the gate
   (tested with R = factor * R_j) becomes RECOVERING: its variance starts at factor * R_j and
   decays geometrically, R_eff = R_j * factor^(1 - s), s = (t - t_return) / ramp_time, to R_j,
@@ -98,6 +106,49 @@ def status_label(status: int, reason: int) -> str:
     if int(status) == STATUS_LOST:
         return f"lost-{REASON_NAMES[int(reason)] or 'unknown'}"
     return name
+
+
+_PENDING = -1.0  # REP_EVENT while the step's decisions are being made
+
+
+@njit(cache=True, inline="always")
+def _fails_prior(rep, cfg, j):
+    nu = rep[j, REP_INNOV]
+    return not (nu * nu <= cfg[j, CFG_GATE] * rep[j, REP_S])
+
+
+_CONSENSUS_WIDENING = 1e4  # consensus only within the gate with R widened this much (as on recovery)
+
+
+@njit(cache=True, inline="always")
+def _plausible(rep, cfg, j):
+    """Within the gate with the measurement variance widened by _CONSENSUS_WIDENING: rules out
+    absurd samples (two sensors reporting the same garbage must not overrule the model)."""
+    nu = rep[j, REP_INNOV]
+    return nu * nu <= cfg[j, CFG_GATE] * (rep[j, REP_S] + (_CONSENSUS_WIDENING - 1.0) * rep[j, REP_R])
+
+
+@njit(cache=True)
+def _agrees_with_another(rep, cfg, value, j, m):
+    """Consensus: another pending channel of the same state also fails the prior gate, and its
+    (offset-corrected) sample agrees with channel j's within the gate (chi-square on the
+    difference, variance R_j + R_i). Two independent sensors that agree with each other but not
+    with the prediction say the prediction is wrong (an overconfident prior, an unmodelled force),
+    not that both sensors failed at once."""
+    k = int(cfg[j, CFG_STATE])
+    if k < 0 or not _plausible(rep, cfg, j):
+        return False
+    for i in range(m):
+        if i == j or math.isnan(rep[i, REP_INNOV]) or int(cfg[i, CFG_STATE]) != k:
+            continue  # only channels with a usable sample of the same state this step
+        if not _fails_prior(rep, cfg, i) or not _plausible(rep, cfg, i):
+            continue  # channel i agrees with the prediction (j is the odd one out), or is absurd
+        d = value[j] - value[i]
+        if cfg[j, CFG_ANGLE] != 0.0:
+            d = wrap_angle(d)
+        if d * d <= cfg[j, CFG_GATE] * (rep[j, REP_R] + rep[i, REP_R]):
+            return True
+    return False
 
 
 @njit(cache=True, inline="always")
@@ -191,11 +242,27 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
         ch[j, CH_LAST_T] = t
         rep[j, REP_INNOV] = nu
         rep[j, REP_S] = s
+        # the decision waits until every channel's innovation is known (consensus below)
+        value[j] = v
+        rep[j, REP_EVENT] = _PENDING
+        ch[j, CH_STATUS] = status
+        ch[j, CH_REASON] = reason
+        ch[j, CH_FAILS] = fails
 
-        passed = mode == MODE_ON or nu * nu <= cfg[j, CFG_GATE] * s
+    for j in range(m):
+        if rep[j, REP_EVENT] != _PENDING:
+            continue
+        status = int(ch[j, CH_STATUS])
+        reason = int(ch[j, CH_REASON])
+        mode = int(ch[j, CH_MODE])
+        fails = int(ch[j, CH_FAILS])
+        ramps = cfg[j, CFG_RAMP_FACTOR] > 1.0 and cfg[j, CFG_RAMP_TIME] > 0.0
+        passed = mode == MODE_ON or not _fails_prior(rep, cfg, j)
         if (not passed and status == STATUS_LOST and fails > 0 and cfg[j, CFG_REACQUIRE] > 0.0
                 and t - ch[j, CH_FAIL_T0] >= cfg[j, CFG_REACQUIRE]):
             passed = True  # re-acquisition: it has disagreed for too long to be an outlier
+        if not passed and _agrees_with_another(rep, cfg, value, j, m):
+            passed = True  # the sensors agree with each other, not with the prediction: the model is off
         if passed:
             if status == STATUS_LOST:
                 if ramps:
@@ -205,7 +272,6 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
                     status = STATUS_OK
                 reason = REASON_NONE
             fails = 0
-            value[j] = v
             rep[j, REP_EVENT] = EVENT_USED
             n_accept += 1
         else:
@@ -219,4 +285,7 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
         ch[j, CH_STATUS] = status
         ch[j, CH_REASON] = reason
         ch[j, CH_FAILS] = fails
+    for j in range(m):
+        if rep[j, REP_EVENT] != EVENT_USED:
+            value[j] = np.nan
     return n_accept
