@@ -53,20 +53,27 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
     fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
     specs = [("z", "depth z [m]", 1.0), ("psi", "heading psi [deg]", _DEG), ("w", "heave velocity w [m/s]", 1.0),
              ("r", "yaw rate r [deg/s]", _DEG)]
+    offsets = meta.get("measurement_offsets", {})
     for ax, (s, label, k) in zip(axes.ravel(), specs):
         _shade(ax, windows)
+        lines = []
         true = _col(columns, f"true_{s}")
         if true is not None:
             ax.plot(t, true * k, color="k", lw=1.2, label="truth")
+            lines.append(true * k)
         for name in columns:
             if name.startswith(f"meas_{s}_"):
                 m = _col(columns, name)
+                off = float(offsets.get(name, 0.0))
                 ok = np.isfinite(m)
-                ax.plot(t[ok], m[ok] * k, ".", ms=2, alpha=0.5, label=f"measured ({name[len(f'meas_{s}_'):]})")
+                sensor = name[len(f"meas_{s}_"):]
+                note = " moved to VO" if off else ""
+                ax.plot(t[ok], (m[ok] - off) * k, ".", ms=2, alpha=0.5, label=f"measured ({sensor}{note})")
         est = _col(columns, f"est_{s}")
         var = _col(columns, f"var_{s}")
         if est is not None:
             ax.plot(t, est * k, color="tab:red", lw=1.0, label="estimate")
+            lines.append(est * k)
             if var is not None:
                 sd = 2 * np.sqrt(np.maximum(var, 0))
                 ax.fill_between(t, (est - sd) * k, (est + sd) * k, color="tab:red", alpha=0.15, lw=0,
@@ -74,6 +81,8 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
         ref = _col(columns, f"ref_{s}")
         if ref is not None:
             ax.plot(t, ref * k, "--", color="tab:green", lw=1.0, label="reference")
+            lines.append(ref * k)
+        _limit_to(ax, lines)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="best")
@@ -99,6 +108,8 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
             sd = 2 * np.sqrt(np.maximum(var, 0)) * k
             ax.plot(t, sd, color="0.4", lw=0.8, ls="--", label="+-2 sigma (filter)")
             ax.plot(t, -sd, color="0.4", lw=0.8, ls="--")
+            big = np.max(np.abs(err * k)[np.isfinite(err)]) if np.isfinite(err).any() else 1.0
+            _limit_to(ax, [err * k, np.clip(sd, 0, 3 * big), -np.clip(sd, 0, 3 * big)])
         ax.set_ylabel(f"error in {label}")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
@@ -151,6 +162,18 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
     fig.tight_layout()
     paths.append(_save(fig, out / "control.png", plt))
     return paths
+
+
+def _limit_to(ax, lines: Sequence[np.ndarray], margin: float = 0.15) -> None:
+    """Scale the y axis to the lines (truth, estimate, reference), not to a covariance band that
+    can grow by orders of magnitude while dead reckoning (the band is then clipped)."""
+    vals = np.concatenate([np.asarray(v, dtype=float).ravel() for v in lines]) if lines else np.array([])
+    vals = vals[np.isfinite(vals)]
+    if vals.size == 0:
+        return
+    lo, hi = float(vals.min()), float(vals.max())
+    pad = margin * (hi - lo) if hi > lo else max(abs(hi), 1.0) * 0.1
+    ax.set_ylim(lo - pad, hi + pad)
 
 
 def write_nees_figure(path: str | Path, t: np.ndarray, nees_runs: np.ndarray, bounds: Sequence[float],

@@ -474,6 +474,7 @@ def _result(prep: Prepared, logs: Mapping[str, np.ndarray]) -> SimResult:
         "dropouts": [{"sensor": d.sensor + (f".{d.channel}" if d.channel else ""), "start_s": d.start_s,
                       "end_s": d.end_s} for d in sc.dropouts],
         "channels": [c.name for c in fm.channels], "thrusters": list(prep.allocator.bank.names),
+        "measurement_offsets": {f"meas_{c.column}": c.offset for c in fm.channels},
         "sample_time_s": a["h"], "plant_step_s": a["h_plant"],
     }
     return SimResult(sc, cols, logs["log_P"], nees, tuple(fm.states[i] for i in idx), nis,
