@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out/demo
 
-.PHONY: demo test test-slow bench clean
+.PHONY: demo test test-slow bench clean clean-cache
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,8 +16,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/rovlab vehicle show udrone
-	$(BIN)/rovlab allocate --wrench 0 0 10 0
+	$(BIN)/rovlab demo --out $(OUT)
 
 test: $(STAMP)
 	./scripts/ensure-chromium.sh
@@ -29,5 +28,8 @@ test-slow: $(STAMP)
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/run_all.py
 
-clean:
+clean: clean-cache
 	rm -rf $(VENV) out build src/*.egg-info
+
+clean-cache:
+	rm -rf $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/numba
