@@ -181,7 +181,10 @@ def write_nees_figure(path: str | Path, t: np.ndarray, nees_runs: np.ndarray, bo
     """Average NEES over Monte Carlo runs against its chi-square bounds."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(10, 3.5))
-    mean = np.nanmean(nees_runs, axis=0)
+    runs = np.asarray(nees_runs, dtype=float)
+    ok = np.isfinite(runs)
+    count = ok.sum(axis=0)
+    mean = np.where(count > 0, np.where(ok, runs, 0.0).sum(axis=0) / np.maximum(count, 1), np.nan)
     ax.plot(t, mean, lw=1.0, label=f"average NEES over {nees_runs.shape[0]} runs")
     ax.axhline(dof, color="k", lw=0.8, label=f"expected ({dof})")
     ax.axhline(bounds[0], color="tab:red", ls="--", lw=0.8, label="95 % chi-square bounds")

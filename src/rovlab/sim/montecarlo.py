@@ -151,7 +151,12 @@ class Progress:
         width = 30
         fill = int(width * done / max(total, 1))
         dt = time.perf_counter() - self.t0
-        self.stream.write(f"\r{self.label} [{'#' * fill}{'.' * (width - fill)}] {done}/{total} runs  {dt:5.1f} s")
-        if done >= total:
-            self.stream.write("\n")
+        line = f"{self.label} [{'#' * fill}{'.' * (width - fill)}] {done}/{total} runs  {dt:5.1f} s"
+        if getattr(self.stream, "isatty", lambda: False)():
+            self.stream.write("\r" + line + ("\n" if done >= total else ""))
+        else:  # a log file: a line per tenth, not a carriage-return animation
+            tenth = int(10 * done / max(total, 1))
+            if tenth != getattr(self, "_last", -1) or done >= total:
+                self._last = tenth
+                self.stream.write(line + "\n")
         self.stream.flush()
