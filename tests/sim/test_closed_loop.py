@@ -146,3 +146,20 @@ def test_runs_are_reproducible_from_their_seed():
     c = simulate("dropout", seed=42)
     np.testing.assert_array_equal(a.columns["est_psi"], b.columns["est_psi"])
     assert not np.array_equal(a.columns["est_psi"], c.columns["est_psi"])
+
+
+@pytest.mark.parametrize("name", ["step-observer-model", "dropout"])
+def test_nees_of_the_compiled_loop_equals_the_metrics_module(runs, name):
+    from rovlab.sim import metrics as mx
+
+    res = runs[name]
+    c = res.columns
+    states = list(res.nees_states)
+    truth = np.column_stack([c[f"true_{s}"] for s in states])
+    est = np.column_stack([c[f"est_{s}"] for s in states])
+    idx = [["z", "psi", "w", "r", "b_w", "b_r"].index(s) for s in states]
+    ref = mx.nees(mx.estimation_error(est, truth), res.P[:, idx][:, :, idx])
+    ok = np.isfinite(ref)
+    assert ok.sum() > 500
+    np.testing.assert_allclose(res.nees[ok], ref[ok], rtol=1e-8)
+    assert np.array_equal(np.isfinite(res.nees), ok)

@@ -42,6 +42,18 @@ def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarra
 
 
 @njit(cache=True)
+def matvec(A: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """A @ v as a plain loop: for these 6 x n matrices a BLAS call costs more than the sums."""
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        acc = 0.0
+        for j in range(A.shape[1]):
+            acc += A[i, j] * v[j]
+        out[i] = acc
+    return out
+
+
+@njit(cache=True)
 def _max_fraction(f: np.ndarray, d: np.ndarray, f_min: np.ndarray, f_max: np.ndarray,
                   free: np.ndarray) -> float:
     alpha = 1.0
@@ -63,7 +75,7 @@ def _add_wrench(B: np.ndarray, T: np.ndarray, s: np.ndarray, f_min: np.ndarray, 
     dtau; return a. Redundant sets redistribute over unsaturated thrusters first."""
     n = B.shape[1]
     free_all = np.ones(n, dtype=np.bool_)
-    d = T @ dtau
+    d = matvec(T, dtau)
     total = _max_fraction(f, d, f_min, f_max, free_all)
     f += total * d
     if not redistribute or total >= 1.0 - _TOL or n <= 6:

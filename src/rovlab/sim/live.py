@@ -152,14 +152,15 @@ class LiveSimulation:
                 if c.sensor == d.sensor and d.channel in (None, c.quantity):
                     dropout[w, j] = True
         observer = a["plant_kind"] == 1
-        plant_normals = np.zeros((0, 4)) if observer else self.rng.standard_normal((n * n_sub, 4))
-        obs_normals = self.rng.standard_normal((n * n_sub, 6)) if observer else np.zeros((0, 6))
+        f32 = np.float32  # plant noise draws in single precision, as in rovlab.sim.runner.prepare
+        plant_normals = np.zeros((0, 4), f32) if observer else self.rng.standard_normal((n * n_sub, 4), dtype=f32)
+        obs_normals = self.rng.standard_normal((n * n_sub, 6), dtype=f32) if observer else np.zeros((0, 6), f32)
         bias_normals = self.rng.standard_normal((n, 4))
         sensor_normals = self.rng.standard_normal((n, m))
         logs = dict(
             log_true=np.empty((n, 4)), log_y=np.empty((n, m)), log_x=np.empty((n, 6)), log_P=np.empty((n, 6, 6)),
             log_u=np.empty((n, 4)), log_pwm=np.empty((n, nt)), log_status=np.empty((n, m)),
-            log_nis=np.empty((n, 2)), log_bias=np.zeros((n, 4)),
+            log_cons=np.empty((n, 3)), log_bias=np.zeros((n, 4)),
         )
         st = self.state
         closed_loop(
@@ -171,7 +172,7 @@ class LiveSimulation:
             a["B"], a["T"], a["s_alloc"], a["f_min"], a["f_max"], a["level"], a["n_levels"], a["rows"],
             a["grid_pwm"], a["grid_force"], a["pwm_res"],
             logs["log_true"], logs["log_y"], logs["log_x"], logs["log_P"], logs["log_u"], logs["log_pwm"],
-            logs["log_status"], logs["log_nis"], logs["log_bias"],
+            logs["log_status"], logs["log_cons"], logs["log_bias"],
         )
         self.k = k0 + n
         cols = _columns(self.prep, logs, times, refs)
