@@ -14,6 +14,7 @@ _COMMAND_MODULES = (
     "rovlab.interfaces.cli_ident",
     "rovlab.interfaces.cli_sim",
     "rovlab.interfaces.cli_design",
+    "rovlab.interfaces.cli_hmi",
 )
 
 

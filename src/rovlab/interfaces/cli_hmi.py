@@ -1,0 +1,92 @@
+"""Sub-command ``hmi``: the local web app to tune and watch a live simulation (see
+rovlab.interfaces.hmi). Interfaces hold no maths."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import signal
+import sys
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("hmi", help="local web app: tune the model, observer and controller, watch the estimates live")
+    p.add_argument("--port", type=int, default=8765, help="TCP port on 127.0.0.1 (0 = pick a free one; default 8765)")
+    p.add_argument("--scenario", default="step-process-model",
+                   help="packaged scenario name or TOML file (default step-process-model; rovlab scenarios lists them)")
+    p.add_argument("--vehicle", default=None, help="vehicle name or TOML file (default: the scenario's)")
+    p.add_argument("--config", default=None, help="filter/controller configuration name or TOML file "
+                                                  "(default: the scenario's)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the simulation (default: the scenario's)")
+    p.add_argument("--speed", type=float, default=1.0, help="times real time (0.1 to 50, default 1)")
+    p.add_argument("--paused", action="store_true", help="start paused (press Start in the page)")
+    p.add_argument("--out", default="out/hmi", help="folder for saved parameters and the session log (default out/hmi)")
+    p.set_defaults(func=_cmd_hmi)
+
+
+def _cmd_hmi(args: argparse.Namespace) -> int:
+    from rovlab.interfaces.cli import UserError
+
+    try:
+        import aiohttp  # noqa: F401
+    except ImportError:
+        raise UserError("the HMI needs aiohttp: pip install 'rovlab[hmi]'") from None
+    from rovlab.interfaces.hmi.session import SPEED_RANGE, Session
+
+    if not 0 <= args.port <= 65535:
+        raise UserError(f"--port must be 0 .. 65535, got {args.port}")
+    if not SPEED_RANGE[0] <= args.speed <= SPEED_RANGE[1]:
+        raise UserError(f"--speed must be {SPEED_RANGE[0]:g} .. {SPEED_RANGE[1]:g}, got {args.speed:g}")
+    if args.seed is not None and args.seed < 0:
+        raise UserError(f"--seed must be >= 0, got {args.seed}")
+    session = Session.simulation(args.scenario, vehicle=args.vehicle, config=args.config, seed=args.seed,
+                                 out_dir=Path(args.out), speed=args.speed, running=not args.paused)
+    try:
+        return asyncio.run(_serve(session, args.port))
+    finally:
+        _write_log(session)
+
+
+async def _serve(session, port: int) -> int:
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.hmi.server import HmiServer
+
+    server = HmiServer(session, port=port)
+    try:
+        url = await server.start()
+    except OSError as exc:
+        await server.stop()
+        raise UserError(f"cannot listen on 127.0.0.1:{port}: {exc.strerror or exc} "
+                        "(use --port 0 for a free port)") from None
+    src = session.source.describe()
+    print(f"rovlab hmi: {src['scenario']['name']} with {src['vehicle']} / {src['config']} "
+          f"({'running' if session.running else 'paused'}, {session.speed:g}x real time)")
+    print(f"rovlab hmi: open {url} in a browser (Ctrl-C stops; the session log goes to {session.log.folder}/)",
+          flush=True)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, stop.set)
+        except (NotImplementedError, RuntimeError):  # pragma: no cover - not on this platform/thread
+            pass
+    try:
+        await stop.wait()
+    finally:
+        await server.stop()
+    return 0
+
+
+def _write_log(session) -> None:
+    """Nothing the user logged is lost: write the session log whatever way we stop."""
+    if not session.log.rows and not session.log.events:
+        print("rovlab hmi: stopped (nothing was logged)", file=sys.stderr)
+        return
+    try:
+        paths = session.export()
+    except OSError as exc:
+        print(f"rovlab hmi: could not write the session log to {session.log.folder}: {exc}", file=sys.stderr)
+        return
+    print(f"rovlab hmi: stopped; session log ({session.log.rows} rows): "
+          + ", ".join(str(p) for p in paths), file=sys.stderr)

@@ -1,0 +1,318 @@
+// rovlab HMI: a small strip-chart module on <canvas> (no dependencies).
+//
+// A StripChart shows the last `window` seconds of a few series against time. Series kinds:
+//   line  - a polyline (gaps where a value is missing)
+//   dots  - one small square per sample (measurements)
+//   step  - a staircase (references)
+//   band  - a filled region between lo and hi (e.g. estimate +/- 2 sigma)
+// Samples go into fixed-size ring buffers (push is O(1), no allocation); draw() renders the
+// visible part with an automatic y range. Call draw() from requestAnimationFrame.
+"use strict";
+
+(function (global) {
+  const FONT = '11px system-ui, -apple-system, "Segoe UI", Roboto, "DejaVu Sans", Arial, sans-serif';
+  const TITLE_FONT = '600 12px system-ui, -apple-system, "Segoe UI", Roboto, "DejaVu Sans", Arial, sans-serif';
+
+  class Ring {
+    constructor(capacity, width) {
+      this.capacity = capacity;
+      this.width = width; // values per sample besides time
+      this.t = new Float64Array(capacity);
+      this.v = new Float64Array(capacity * width);
+      this.start = 0;
+      this.length = 0;
+    }
+    push(t, a, b) {
+      let i;
+      if (this.length < this.capacity) {
+        i = (this.start + this.length) % this.capacity;
+        this.length++;
+      } else {
+        i = this.start;
+        this.start = (this.start + 1) % this.capacity;
+      }
+      this.t[i] = t;
+      this.v[i * this.width] = a;
+      if (this.width > 1) this.v[i * this.width + 1] = b;
+    }
+    clear() { this.start = 0; this.length = 0; }
+    index(k) { return (this.start + k) % this.capacity; }
+    // first logical index with t >= t0 (binary search; times are non-decreasing)
+    lowerBound(t0) {
+      let lo = 0, hi = this.length;
+      while (lo < hi) {
+        const mid = (lo + hi) >> 1;
+        if (this.t[this.index(mid)] < t0) lo = mid + 1; else hi = mid;
+      }
+      return lo;
+    }
+    lastTime() { return this.length ? this.t[this.index(this.length - 1)] : NaN; }
+  }
+
+  class Series {
+    constructor(opts) {
+      this.name = opts.name;
+      this.label = opts.label || opts.name;
+      this.kind = opts.kind || "line";
+      this.color = opts.color || "#333";
+      this.fill = opts.fill || "rgba(0,0,0,0.12)";
+      this.width = opts.width || 1.5;
+      this.dash = opts.dash || null;
+      this.legend = opts.legend !== false;
+      this.ring = new Ring(opts.capacity || 4096, this.kind === "band" ? 2 : 1);
+    }
+    push(t, y) { this.ring.push(t, y, 0); }
+    pushBand(t, lo, hi) { this.ring.push(t, lo, hi); }
+    clear() { this.ring.clear(); }
+  }
+
+  function niceStep(span, target) {
+    const raw = span / Math.max(1, target);
+    const mag = Math.pow(10, Math.floor(Math.log10(raw)));
+    const n = raw / mag;
+    return (n < 1.5 ? 1 : n < 3 ? 2 : n < 7 ? 5 : 10) * mag;
+  }
+
+  function fmt(v, step) {
+    if (v === 0) return "0";
+    const a = Math.abs(v);
+    if (a >= 1e5 || a < 1e-3) return v.toExponential(1);
+    const digits = Math.max(0, Math.min(6, -Math.floor(Math.log10(step) + 1e-9)));
+    return v.toFixed(digits);
+  }
+
+  class StripChart {
+    constructor(canvas, opts) {
+      this.canvas = canvas;
+      this.ctx = canvas.getContext("2d");
+      this.title = opts.title || "";
+      this.unit = opts.unit || "";
+      this.window = opts.window || 60;
+      this.minSpan = opts.minSpan || 1e-9;
+      this.series = [];
+      this.byName = {};
+      this.now = 0;
+      this.dirty = true;
+      this.cssWidth = 0;
+      this.cssHeight = 0;
+    }
+    add(opts) {
+      const s = new Series(opts);
+      this.series.push(s);
+      this.byName[s.name] = s;
+      this.dirty = true;
+      return s;
+    }
+    get(name) { return this.byName[name]; }
+    push(name, t, y) {
+      const s = this.byName[name];
+      if (s === undefined || y === null || y === undefined || !isFinite(y)) return;
+      s.push(t, y);
+      if (t > this.now) this.now = t;
+      this.dirty = true;
+    }
+    pushBand(name, t, lo, hi) {
+      const s = this.byName[name];
+      if (s === undefined || !isFinite(lo) || !isFinite(hi)) return;
+      s.pushBand(t, lo, hi);
+      if (t > this.now) this.now = t;
+      this.dirty = true;
+    }
+    clear() {
+      for (const s of this.series) s.clear();
+      this.now = 0;
+      this.dirty = true;
+    }
+    resize() {
+      const dpr = global.devicePixelRatio || 1;
+      const w = this.canvas.clientWidth, h = this.canvas.clientHeight;
+      if (w === 0 || h === 0) return false;
+      if (w !== this.cssWidth || h !== this.cssHeight || this.canvas.width !== Math.round(w * dpr)) {
+        this.cssWidth = w;
+        this.cssHeight = h;
+        this.canvas.width = Math.round(w * dpr);
+        this.canvas.height = Math.round(h * dpr);
+        this.dirty = true;
+      }
+      this.ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+      return true;
+    }
+    yRange(t0, t1) {
+      let lo = Infinity, hi = -Infinity;
+      for (const s of this.series) {
+        const r = s.ring;
+        for (let k = r.lowerBound(t0); k < r.length; k++) {
+          const i = r.index(k);
+          if (r.t[i] > t1) break;
+          for (let j = 0; j < r.width; j++) {
+            const v = r.v[i * r.width + j];
+            if (v < lo) lo = v;
+            if (v > hi) hi = v;
+          }
+        }
+      }
+      if (!isFinite(lo)) { lo = -1; hi = 1; }
+      let span = hi - lo;
+      if (span < this.minSpan) {
+        const mid = (hi + lo) / 2;
+        lo = mid - this.minSpan / 2;
+        hi = mid + this.minSpan / 2;
+        span = this.minSpan;
+      }
+      return [lo - 0.08 * span, hi + 0.08 * span];
+    }
+    firstTime() {
+      let t = Infinity;
+      for (const s of this.series) if (s.ring.length) t = Math.min(t, s.ring.t[s.ring.index(0)]);
+      return t;
+    }
+    legendLayout(ctx, x0, xMax) {
+      // entries of series that have data, wrapped onto lines after the title
+      const items = [];
+      let x = x0, line = 0;
+      for (const s of this.series) {
+        if (!s.legend || !s.ring.length) continue;
+        const w = ctx.measureText(s.label).width + 30;
+        if (x + w > xMax && x > x0) { line++; x = 52; }
+        items.push({ s, x, line });
+        x += w;
+      }
+      return { items, lines: line + 1 };
+    }
+    draw() {
+      if (!this.resize()) return false;
+      const ctx = this.ctx, W = this.cssWidth, H = this.cssHeight;
+      const left = 52, right = 8, bottom = 20;
+      ctx.font = TITLE_FONT;
+      const title = this.unit ? `${this.title} [${this.unit}]` : this.title;
+      const titleWidth = ctx.measureText(title).width;
+      ctx.font = FONT;
+      const legend = this.legendLayout(ctx, left + titleWidth + 24, W - right);
+      const top = 22 + 15 * (legend.lines - 1);
+      const pw = W - left - right, ph = H - top - bottom;
+      // the window fills from the left until it is full, then scrolls
+      const first = this.firstTime();
+      const t1 = Math.max(this.now, (isFinite(first) ? first : 0) + this.window);
+      const t0 = t1 - this.window;
+      const [y0, y1] = this.yRange(t0, t1);
+      const X = (t) => left + (t - t0) / (t1 - t0) * pw;
+      const Y = (v) => top + (1 - (v - y0) / (y1 - y0)) * ph;
+
+      ctx.clearRect(0, 0, W, H);
+      ctx.fillStyle = "#ffffff";
+      ctx.fillRect(left, top, pw, ph);
+      // grid and tick labels
+      ctx.font = FONT;
+      ctx.lineWidth = 1;
+      ctx.strokeStyle = "#e6e9ee";
+      ctx.fillStyle = "#5b6573";
+      ctx.textAlign = "right";
+      ctx.textBaseline = "middle";
+      const ys = niceStep(y1 - y0, Math.max(2, Math.floor(ph / 28)));
+      ctx.beginPath();
+      for (let v = Math.ceil(y0 / ys) * ys; v <= y1; v += ys) {
+        const y = Math.round(Y(v)) + 0.5;
+        ctx.moveTo(left, y); ctx.lineTo(left + pw, y);
+        ctx.fillText(fmt(Math.abs(v) < ys * 1e-6 ? 0 : v, ys), left - 5, y);
+      }
+      const xs = niceStep(this.window, Math.max(2, Math.floor(pw / 70)));
+      ctx.textAlign = "center";
+      ctx.textBaseline = "top";
+      for (let t = Math.ceil(t0 / xs) * xs; t <= t1; t += xs) {
+        const x = Math.round(X(t)) + 0.5;
+        ctx.moveTo(x, top); ctx.lineTo(x, top + ph);
+        if (t >= 0) ctx.fillText(fmt(t, xs) + (t + xs > t1 ? " s" : ""), x, top + ph + 4);
+      }
+      ctx.stroke();
+      ctx.strokeStyle = "#b8c0cc";
+      ctx.strokeRect(left + 0.5, top + 0.5, pw - 1, ph - 1);
+
+      // series, clipped to the plot area
+      ctx.save();
+      ctx.beginPath();
+      ctx.rect(left, top, pw, ph);
+      ctx.clip();
+      for (const s of this.series) this.drawSeries(s, t0, t1, X, Y);
+      ctx.restore();
+
+      // title (with unit) and legend
+      ctx.textBaseline = "alphabetic";
+      ctx.textAlign = "left";
+      ctx.font = TITLE_FONT;
+      ctx.fillStyle = "#1d2430";
+      ctx.fillText(title, left, 15);
+      ctx.font = FONT;
+      for (const { s, x, line } of legend.items) {
+        const yb = 15 + 15 * line;
+        if (s.kind === "band") {
+          ctx.fillStyle = s.fill;
+          ctx.fillRect(x, yb - 8, 14, 9);
+        } else if (s.kind === "dots") {
+          ctx.fillStyle = s.color;
+          ctx.fillRect(x + 5, yb - 6, 4, 4);
+        } else {
+          ctx.strokeStyle = s.color;
+          ctx.lineWidth = 2;
+          ctx.setLineDash(s.dash || []);
+          ctx.beginPath(); ctx.moveTo(x, yb - 3.5); ctx.lineTo(x + 14, yb - 3.5); ctx.stroke();
+          ctx.setLineDash([]);
+        }
+        ctx.fillStyle = "#3a4350";
+        ctx.fillText(s.label, x + 18, yb);
+      }
+      this.dirty = false;
+      return true;
+    }
+    drawSeries(s, t0, t1, X, Y) {
+      const ctx = this.ctx, r = s.ring;
+      if (!r.length) return;
+      const k0 = Math.max(0, r.lowerBound(t0) - 1);
+      if (s.kind === "band") {
+        ctx.fillStyle = s.fill;
+        ctx.beginPath();
+        let started = false;
+        const idx = [];
+        for (let k = k0; k < r.length; k++) idx.push(r.index(k));
+        for (const i of idx) {
+          const x = X(r.t[i]), y = Y(r.v[2 * i + 1]);
+          if (!started) { ctx.moveTo(x, y); started = true; } else ctx.lineTo(x, y);
+        }
+        for (let j = idx.length - 1; j >= 0; j--) {
+          const i = idx[j];
+          ctx.lineTo(X(r.t[i]), Y(r.v[2 * i]));
+        }
+        ctx.closePath();
+        ctx.fill();
+        return;
+      }
+      if (s.kind === "dots") {
+        ctx.fillStyle = s.color;
+        for (let k = k0; k < r.length; k++) {
+          const i = r.index(k);
+          ctx.fillRect(X(r.t[i]) - 1.25, Y(r.v[i]) - 1.25, 2.5, 2.5);
+        }
+        return;
+      }
+      ctx.strokeStyle = s.color;
+      ctx.lineWidth = s.width;
+      ctx.lineJoin = "round";
+      ctx.setLineDash(s.dash || []);
+      ctx.beginPath();
+      let prevT = NaN, prevY = NaN;
+      for (let k = k0; k < r.length; k++) {
+        const i = r.index(k);
+        const x = X(r.t[i]), y = Y(r.v[i]);
+        if (isNaN(prevT) || r.t[i] < prevT) ctx.moveTo(x, y);
+        else if (s.kind === "step") { ctx.lineTo(x, prevY); ctx.lineTo(x, y); }
+        else ctx.lineTo(x, y);
+        prevT = r.t[i];
+        prevY = y;
+      }
+      if (s.kind === "step" && !isNaN(prevT)) ctx.lineTo(X(Math.max(prevT, this.now)), prevY);
+      ctx.stroke();
+      ctx.setLineDash([]);
+    }
+  }
+
+  global.RovPlot = { StripChart, niceStep, fmt };
+})(window);

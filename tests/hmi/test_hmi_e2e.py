@@ -1,0 +1,300 @@
+"""End-to-end tests of the HMI in a real headless browser: Debian's Chromium (/usr/bin/chromium)
+driven by Playwright. We never download a browser (no `playwright install`); without Chromium
+these tests skip with the reason, except in CI (environment variable CI set), where they fail.
+
+Screenshots go to test-artifacts/hmi/ (kept by CI as artifacts of the test output folder).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = Path("/usr/bin/chromium")
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "hmi"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+WAIT_MS = 20000
+
+
+def _missing_reason() -> str | None:
+    if not CHROMIUM.exists():
+        return f"{CHROMIUM} is missing (install Debian's chromium: scripts/ensure-chromium.sh)"
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        return "playwright is not installed (pip install -e '.[dev]')"
+    return None
+
+
+_REASON = _missing_reason()
+if _REASON is not None:
+    if os.environ.get("CI"):
+        pytest.fail(f"CI must run the HMI browser tests: {_REASON}", pytrace=False)
+    pytest.skip(_REASON, allow_module_level=True)
+
+from playwright.sync_api import sync_playwright  # noqa: E402
+
+from rovlab.interfaces.hmi.server import ServerThread  # noqa: E402
+from rovlab.interfaces.hmi.session import Session  # noqa: E402
+from rovlab.params.vehicle import load_vehicle  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def browser():
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    # Playwright gives every launch a fresh, empty profile (its own --user-data-dir)
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+def _serve(tmp_path, **kwargs):
+    options = dict(out_dir=tmp_path / "out", speed=5.0, running=True)
+    options.update(kwargs)
+    session = Session.simulation("step-process-model", **options)
+    return ServerThread(session).start()
+
+
+@pytest.fixture
+def server(tmp_path):
+    st = _serve(tmp_path)
+    yield st
+    st.stop()
+
+
+class Page:
+    """A page of the HMI with what it asked for from the network, and its console errors."""
+
+    def __init__(self, browser, url: str):
+        self.context = browser.new_context(viewport={"width": 1600, "height": 1000})
+        self.local = url.rstrip("/")
+        self.requests: list[str] = []
+        self.external: list[str] = []
+        self.errors: list[str] = []
+
+        def route(r):
+            self.requests.append(r.request.url)
+            if r.request.url.startswith(self.local + "/"):
+                r.continue_()
+            else:  # nothing may come from anywhere else; block and remember it
+                self.external.append(r.request.url)
+                r.abort()
+
+        self.context.route("**/*", route)
+        self.page = self.context.new_page()
+        self.page.on("console", lambda m: self.errors.append(m.text) if m.type == "error" else None)
+        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+        self.page.on("websocket", lambda ws: self.requests.append(ws.url))
+
+    def open(self):
+        t0 = time.perf_counter()
+        self.page.goto(self.local + "/", wait_until="load")
+        self.load_s = time.perf_counter() - t0
+        self.page.wait_for_function("() => window.hmi && window.hmi.stats.hellos > 0", timeout=WAIT_MS)
+        return self
+
+    def tab(self, name: str):
+        self.page.click(f"#tabs button[data-tab={name}]")
+
+    def field(self, target: str, key: str):
+        return self.page.locator(f'input[data-target="{target}"][data-key="{key}"]')
+
+    def shot(self, name: str):
+        self.page.screenshot(path=str(ARTIFACTS / f"{name}.png"))
+
+    def close(self):
+        self.context.close()
+
+
+@pytest.fixture
+def page(browser, server):
+    p = Page(browser, server.url).open()
+    yield p
+    p.close()
+
+
+def _state(server) -> dict:
+    with urllib.request.urlopen(server.url + "api/state", timeout=10) as r:
+        return json.load(r)
+
+
+def _wait(predicate, timeout=WAIT_MS / 1000, what="condition"):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_the_page_loads_with_no_external_requests(page):
+    assert page.external == []
+    kinds = sorted(u.rsplit("/", 1)[-1] for u in page.requests)
+    assert kinds == ["", "app.js", "plot.js", "style.css", "ws"]
+    assert all(u.startswith(("http://127.0.0.1:", "ws://127.0.0.1:")) for u in page.requests)
+    assert "step-process-model" in page.page.inner_text("#title")
+    assert page.page.inner_text("#conn") == "online"
+    assert page.errors == []
+    print(f"page load: {page.load_s * 1000:.0f} ms")  # measured in benchmarks/bench_hmi.py
+
+
+def test_the_plots_update(page, server):
+    p = page.page
+    p.wait_for_function("() => hmi.stats.lastT > 2 && hmi.stats.draws > 3", timeout=WAIT_MS)
+    before = p.evaluate("[hmi.stats.lastT, hmi.stats.draws, hmi.charts.z.get('est').ring.length]")
+    p.wait_for_function(f"() => hmi.stats.lastT > {before[0] + 2} && hmi.stats.draws > {before[1] + 3}", timeout=WAIT_MS)
+    after = p.evaluate("[hmi.stats.lastT, hmi.stats.draws, hmi.charts.z.get('est').ring.length]")
+    assert after[2] > before[2]
+    for name in ("z", "psi", "w", "r", "b_w", "b_r", "tau_Z", "tau_N", "pwm"):
+        assert p.evaluate(f"hmi.charts['{name}'].series.some(s => s.ring.length > 0)"), name
+    # the canvas really has ink on it (not a blank white box)
+    inked = p.evaluate("""(() => { const c = document.querySelector('[data-chart=z] canvas');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data; let n = 0;
+        for (let i = 0; i < d.length; i += 4) if (d[i] < 200 && d[i + 3] > 0) n++; return n; })()""")
+    assert inked > 500
+    assert _state(server)["time_s"] >= after[0]
+    badges = p.locator("#badges .badge")
+    assert badges.count() == 3
+    page.shot("plots")
+
+
+def test_a_parameter_change_reaches_the_loop(page, server):
+    page.tab("vehicle")
+    mass = page.field("vehicle", "rigid_body.mass")
+    assert mass.input_value() == "7.31"
+    mass.fill("7.9")
+    mass.press("Enter")
+    _wait(lambda: _state(server)["loop"]["vehicle"]["mass"] == 7.9, what="the model mass in the loop")
+    assert _state(server)["loop"]["truth"]["mass"] == 7.31  # the plant keeps its own
+    page.tab("lqr")
+    zmax = page.field("config", "lqr.state_max.z")
+    k_before = _state(server)["loop"]["K"][0][0]
+    zmax.fill("0.5")
+    zmax.press("Enter")
+    _wait(lambda: _state(server)["loop"]["K"][0][0] > 2 * k_before, what="new LQR gains")
+    shown = f"{_state(server)['loop']['K'][0][0]:.5g}"[:4]  # the page shows the new gain
+    page.page.wait_for_function("(s) => document.querySelector('#loop-lqr').textContent.includes(s)",
+                                arg=shown, timeout=WAIT_MS)
+    page.shot("lqr-tuned")
+
+
+def test_a_bad_value_is_rejected_with_a_message(page, server):
+    page.tab("vehicle")
+    mass = page.field("vehicle", "rigid_body.mass")
+    msg = page.page.locator('[data-msg-for="vehicle:rigid_body.mass"]')
+    for bad, words in (("-3", "expected a positive number"), ("abc", "expected a number"),
+                       ("nan", "expected a finite number")):
+        mass.fill(bad)
+        mass.press("Enter")
+        page.page.wait_for_function(
+            f"() => document.querySelector('[data-msg-for=\"vehicle:rigid_body.mass\"]').textContent.includes('{words}')",
+            timeout=WAIT_MS)
+        assert "rigid_body.mass" in msg.inner_text()
+        assert "bad" in mass.get_attribute("class")
+        assert _state(server)["loop"]["vehicle"]["mass"] == 7.31  # the running loop is untouched
+    page.shot("bad-value")
+    # positive damping on the plant, a negative variance, an unobservable sensor set
+    page.tab("truth")
+    damp = page.field("truth", "damping.heave.linear")
+    damp.fill("4")
+    damp.press("Enter")
+    page.page.wait_for_function("() => [...document.querySelectorAll('#form-truth .field-msg')]"
+                                ".some(e => e.textContent.includes('damping is <= 0'))", timeout=WAIT_MS)
+    page.tab("observer")
+    var = page.field("config", "measurements[1].variance")
+    var.fill("-1e-4")
+    var.press("Enter")
+    page.page.wait_for_function("() => [...document.querySelectorAll('#form-observer .field-msg')]"
+                                ".some(e => e.textContent.includes('positive'))", timeout=WAIT_MS)
+    page.page.click('input[data-measurement="qualisys:psi"]')
+    page.page.wait_for_function("() => [...document.querySelectorAll('#form-observer .field-msg')]"
+                                ".some(e => e.textContent.includes('cannot be estimated'))", timeout=WAIT_MS)
+    assert page.page.is_checked('input[data-measurement="qualisys:psi"]')  # put back: refused
+    state = _state(server)
+    assert set(state["loop"]["R"]) == {"qualisys.z", "pressure.z", "qualisys.psi"}
+    assert state["loop"]["truth"]["damping_linear"][2] == -5.18
+    page.shot("bad-observer")
+
+
+def test_a_sensor_switch_gives_dead_reckoning_and_recovery(page, server):
+    p = page.page
+    p.wait_for_function("() => hmi.stats.lastT > 8", timeout=WAIT_MS)  # past the initial transient
+    p.click('button[data-sensor="qualisys"]')
+    badge = '#badges .badge[data-channel="qualisys.psi"]'
+    p.wait_for_selector(f'{badge}[data-status="lost"]', timeout=WAIT_MS)
+    assert p.get_attribute('#badges .badge[data-channel="pressure.z"]', "data-status") == "ok"
+    state = _state(server)
+    assert state["sensors"]["qualisys"] is False
+    v0 = state["latest"]["/rovlab/estimate"]["variance"]["psi"]
+    _wait(lambda: _state(server)["latest"]["/rovlab/estimate"]["variance"]["psi"] > 10 * v0,
+          what="the heading variance to grow (dead reckoning)")
+    page.shot("dead-reckoning")
+    p.click('button[data-sensor="qualisys"]')
+    p.wait_for_selector(f'{badge}[data-status="recovering"]', timeout=WAIT_MS)
+    p.wait_for_selector(f'{badge}[data-status="ok"]', timeout=WAIT_MS)
+    assert _state(server)["sensors"]["qualisys"] is True
+    page.shot("recovered")
+
+
+def test_a_saved_file_reloads(page, server, browser, tmp_path):
+    page.tab("vehicle")
+    izz = page.field("vehicle", "rigid_body.I_zz")
+    izz.fill("0.21")
+    izz.press("Enter")
+    _wait(lambda: _state(server)["loop"]["vehicle"]["I_zz"] == 0.21, what="I_zz in the loop")
+    page.tab("files")
+    page.page.click('button[data-save="all"]')
+    page.page.wait_for_selector("#saved li a", timeout=WAIT_MS)
+    paths = page.page.eval_on_selector_all("#saved li a", "els => els.map(e => e.title)")
+    vehicle_file = next(p for p in paths if Path(p).name.startswith("vehicle-"))
+    config_file = next(p for p in paths if Path(p).name.startswith("config-"))
+    assert load_vehicle(vehicle_file).I_zz == 0.21
+    assert "# yaw moment of inertia" in Path(vehicle_file).read_text()  # comments kept
+    page.shot("saved")
+    # a new HMI on the saved files shows the tuned value
+    again = _serve(tmp_path / "again", vehicle=vehicle_file, config=config_file, running=False)
+    try:
+        p2 = Page(browser, again.url).open()
+        p2.tab("vehicle")
+        assert p2.field("vehicle", "rigid_body.I_zz").input_value() == "0.21"
+        p2.close()
+    finally:
+        again.stop()
+
+
+def test_controls_start_pause_reset_speed_and_export(page, server):
+    p = page.page
+    p.wait_for_function("() => hmi.stats.lastT > 1", timeout=WAIT_MS)
+    p.click("#btn-run")  # pause
+    _wait(lambda: _state(server)["running"] is False, what="pause")
+    t = _state(server)["time_s"]
+    p.click("#btn-step")
+    _wait(lambda: _state(server)["time_s"] > t, what="one step")
+    p.select_option("#speed", "20")
+    _wait(lambda: _state(server)["speed"] == 20.0, what="speed")
+    p.click("#btn-run")
+    _wait(lambda: _state(server)["time_s"] > t + 5, what="running at 20x")
+    p.click("#btn-reset")
+    p.wait_for_function("() => hmi.charts.z.get('est').ring.length < 30", timeout=WAIT_MS)
+    page.tab("run")
+    p.fill("#ref-depth", "0.4")
+    p.fill("#ref-heading", "-45")
+    p.click("#ref-set")
+    _wait(lambda: abs(_state(server)["reference"]["heading_deg"] + 45) < 1e-9, what="reference")
+    p.fill("#ref-depth", "deep")
+    p.click("#ref-set")
+    p.wait_for_function("() => document.querySelector('#ref-msg').textContent.includes('depth_m')", timeout=WAIT_MS)
+    page.tab("files")
+    p.click("#export")
+    p.wait_for_selector("#exported li a", timeout=WAIT_MS)
+    names = p.eval_on_selector_all("#exported li a", "els => els.map(e => e.textContent)")
+    assert any(n.endswith(".csv") for n in names) and any(n.endswith("-events.json") for n in names)
+    assert page.errors == []
