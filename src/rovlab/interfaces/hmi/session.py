@@ -274,8 +274,9 @@ class Session:
         except (ValueError, TypeError, ArithmeticError, KeyError) as exc:
             raise CommandError(f"{target}: refused: {exc}", key=next(iter(changes))) from None
         doc.commit(data, value)
-        self.log.event(self.source.time, "set", target=target, changes=_jsonable(changes))
-        return Outcome(result={"target": target, "applied": {k: doc.get(k) for k in changes}},
+        applied = {k: doc.get(k) for k in changes}
+        self.log.event(self.source.time, "set", target=target, changes=_jsonable(applied))
+        return Outcome(result={"target": target, "applied": applied},
                        documents_changed=True, state_changed=True)
 
     def _revert(self, c: dict) -> Outcome:

@@ -137,9 +137,10 @@
       this.ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
       return true;
     }
-    yRange(t0, t1) {
+    extent(t0, t1, bands) {
       let lo = Infinity, hi = -Infinity;
       for (const s of this.series) {
+        if ((s.kind === "band") !== bands) continue;
         const r = s.ring;
         for (let k = r.lowerBound(t0); k < r.length; k++) {
           const i = r.index(k);
@@ -151,15 +152,28 @@
           }
         }
       }
+      return [lo, hi];
+    }
+    yRange(t0, t1) {
+      // fit the lines and dots; a band (e.g. +/- 2 sigma while dead-reckoning) may widen the range
+      // by at most the data's own span on each side, so it never squashes the estimate flat
+      let [lo, hi] = this.extent(t0, t1, false);
+      const [blo, bhi] = this.extent(t0, t1, true);
+      if (!isFinite(lo)) { lo = blo; hi = bhi; }
       if (!isFinite(lo)) { lo = -1; hi = 1; }
-      let span = hi - lo;
+      let span = Math.max(hi - lo, this.minSpan);
+      if (isFinite(blo)) {
+        lo = Math.min(lo, Math.max(blo, lo - span));
+        hi = Math.max(hi, Math.min(bhi, hi + span));
+      }
+      span = hi - lo;
       if (span < this.minSpan) {
         const mid = (hi + lo) / 2;
         lo = mid - this.minSpan / 2;
         hi = mid + this.minSpan / 2;
         span = this.minSpan;
       }
-      return [lo - 0.08 * span, hi + 0.08 * span];
+      return [lo - 0.06 * span, hi + 0.06 * span];
     }
     firstTime() {
       let t = Infinity;
@@ -221,7 +235,11 @@
       for (let t = Math.ceil(t0 / xs) * xs; t <= t1; t += xs) {
         const x = Math.round(X(t)) + 0.5;
         ctx.moveTo(x, top); ctx.lineTo(x, top + ph);
-        if (t >= 0) ctx.fillText(fmt(t, xs) + (t + xs > t1 ? " s" : ""), x, top + ph + 4);
+        if (t >= 0) {
+          const label = fmt(t, xs) + (t + xs > t1 ? " s" : "");
+          const half = ctx.measureText(label).width / 2;
+          ctx.fillText(label, Math.min(x, W - right - half), top + ph + 4);  // keep the last one inside
+        }
       }
       ctx.stroke();
       ctx.strokeStyle = "#b8c0cc";
