@@ -63,7 +63,7 @@ def dist(values: list[float]) -> str:
     if not values:
         return "-"
     v = sorted(values)
-    q = lambda p: v[min(len(v) - 1, int(p * (len(v) - 1) + 0.5))]  # noqa: E731
+    q = lambda p: v[min(len(v) - 1, int(p * (len(v) - 1) + 0.5))]
     return f"median {ms(q(0.5))}, p90 {ms(q(0.9))}, p99 {ms(q(0.99))}, max {ms(v[-1])} (n={len(v)})"
 
 
@@ -94,44 +94,30 @@ async def page_loads(browser, url: str, n: int) -> None:
 async def ws_client(url: str, stop: asyncio.Event, record: dict) -> None:
     import aiohttp
 
-    async with aiohttp.ClientSession() as http:
-        async with http.ws_connect(url.replace("http", "ws") + "ws") as ws:
-            record.update(frames=0, rows=0, gaps=[], last=None)
-            while not stop.is_set():
-                try:
-                    msg = await ws.receive(timeout=0.5)
-                except asyncio.TimeoutError:
-                    continue
-                if msg.type != aiohttp.WSMsgType.TEXT:
-                    break
-                frame = json.loads(msg.data)
-                if frame["type"] == "data":
-                    now = time.perf_counter()
-                    if record["last"] is not None:
-                        record["gaps"].append(now - record["last"])
-                    record["last"] = now
-                    record["frames"] += 1
-                    record["rows"] += frame["rows"]
-
-
-async def command(url: str, **cmd) -> None:
-    import aiohttp
-
-    async with aiohttp.ClientSession() as http:
-        async with http.ws_connect(url.replace("http", "ws") + "ws") as ws:
-            await ws.send_str(json.dumps(cmd))
-            while True:
-                frame = json.loads((await ws.receive(timeout=10)).data)
-                if frame["type"] in ("reply", "error"):
-                    return
+    async with aiohttp.ClientSession() as http, http.ws_connect(url.replace("http", "ws") + "ws") as ws:
+        record.update(frames=0, rows=0, gaps=[], last=None)
+        while not stop.is_set():
+            try:
+                msg = await ws.receive(timeout=0.5)
+            except TimeoutError:
+                continue
+            if msg.type != aiohttp.WSMsgType.TEXT:
+                break
+            frame = json.loads(msg.data)
+            if frame["type"] == "data":
+                now = time.perf_counter()
+                if record["last"] is not None:
+                    record["gaps"].append(now - record["last"])
+                record["last"] = now
+                record["frames"] += 1
+                record["rows"] += frame["rows"]
 
 
 async def state(url: str) -> dict:
     import aiohttp
 
-    async with aiohttp.ClientSession() as http:
-        async with http.get(url + "api/state") as r:
-            return await r.json()
+    async with aiohttp.ClientSession() as http, http.get(url + "api/state") as r:
+        return await r.json()
 
 
 async def pacing(browser, url: str, seconds: float, clients: int, speed: float) -> None:
@@ -140,7 +126,7 @@ async def pacing(browser, url: str, seconds: float, clients: int, speed: float) 
     await page.goto(url, wait_until="load")
     await page.wait_for_function("() => window.hmi && window.hmi.stats.frames > 0")
     stop = asyncio.Event()
-    records = [dict() for _ in range(clients)]
+    records: list[dict] = [{} for _ in range(clients)]
     tasks = [asyncio.create_task(ws_client(url, stop, r)) for r in records]
     await asyncio.sleep(1.0)  # everyone connected
     before = await state(url)

@@ -40,7 +40,7 @@ def test_start_serve_and_stop_with_ctrl_c(tmp_path):
             assert b"rovlab HMI" in r.read()
         time.sleep(0.5)  # let it log a few steps
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=60)
+        _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -38,11 +38,11 @@ if _REASON is not None:
         pytest.fail(f"CI must run the HMI browser tests: {_REASON}", pytrace=False)
     pytest.skip(_REASON, allow_module_level=True)
 
-from playwright.sync_api import sync_playwright  # noqa: E402
+from playwright.sync_api import sync_playwright
 
-from rovlab.interfaces.hmi.server import ServerThread  # noqa: E402
-from rovlab.interfaces.hmi.session import Session  # noqa: E402
-from rovlab.params.vehicle import load_vehicle  # noqa: E402
+from rovlab.interfaces.hmi.server import ServerThread
+from rovlab.interfaces.hmi.session import Session
+from rovlab.params.vehicle import load_vehicle
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +56,7 @@ def browser():
 
 
 def _serve(tmp_path, **kwargs):
-    options = dict(out_dir=tmp_path / "out", speed=5.0, running=True)
+    options = {"out_dir": tmp_path / "out", "speed": 5.0, "running": True}
     options.update(kwargs)
     session = Session.simulation("step-process-model", **options)
     return ServerThread(session).start()

@@ -39,7 +39,7 @@ async def _next(ws, kind, *, skip=("data", "state", "documents", "reset")):
 
 def test_the_page_and_its_files_are_served_locally_with_a_strict_policy(session):
     async def main():
-        server, client = await _client(session)
+        _, client = await _client(session)
         try:
             r = await client.get("/")
             html = await r.text()
@@ -65,7 +65,7 @@ def test_the_page_and_its_files_are_served_locally_with_a_strict_policy(session)
 
 def test_hello_then_commands_and_replies(session):
     async def main():
-        server, client = await _client(session)
+        _, client = await _client(session)
         try:
             ws = await client.ws_connect("/ws")
             hello = await _next(ws, "hello")
@@ -93,7 +93,7 @@ def test_hello_then_commands_and_replies(session):
 
 def test_garbage_goes_back_to_its_sender_only_and_the_server_keeps_running(session):
     async def main():
-        server, client = await _client(session)
+        _, client = await _client(session)
         try:
             good = await client.ws_connect("/ws")
             bad = await client.ws_connect("/ws")
@@ -129,7 +129,7 @@ def test_garbage_goes_back_to_its_sender_only_and_the_server_keeps_running(sessi
 
 def test_many_clients_see_the_same_stream_and_disconnects_are_harmless(session):
     async def main():
-        server, client = await _client(session)
+        _, client = await _client(session)
         try:
             sockets = [await client.ws_connect("/ws") for _ in range(6)]
             for ws in sockets:
@@ -185,7 +185,7 @@ def test_the_pacer_keeps_time_and_a_reset_clears_the_clients(session):
 
 def test_a_websocket_from_another_origin_is_refused(session):
     async def main():
-        server, client = await _client(session)
+        _, client = await _client(session)
         try:
             r = await client.get("/ws", headers={"Origin": "http://evil.example", "Connection": "Upgrade",
                                                  "Upgrade": "websocket", "Sec-WebSocket-Version": "13",
@@ -202,7 +202,7 @@ def test_a_websocket_from_another_origin_is_refused(session):
 
 def test_saved_and_exported_files_can_be_downloaded(session):
     async def main():
-        server, client = await _client(session)
+        _, client = await _client(session)
         try:
             ws = await client.ws_connect("/ws")
             await _next(ws, "hello")

@@ -15,8 +15,9 @@ import copy
 import datetime as _dt
 import math
 import tomllib
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import tomlkit
 
@@ -179,8 +180,8 @@ class ParameterDocument:
                 new_text = tomlkit.dumps(doc)
                 if _same(tomllib.loads(new_text), self.data):
                     return new_text, True
-            except Exception:  # noqa: BLE001 - tomlkit has its own error types; fall back to a plain dump
-                pass
+            except Exception:  # noqa: BLE001, S110 - tomlkit has its own error types; the plain dump below
+                pass  # still saves every value, only the comments are lost (and the caller says so)
         return tomlkit.dumps(self.data), False
 
     def save(self, path: str | Path) -> tuple[Path, bool]:

@@ -14,8 +14,9 @@ import json
 import math
 import time
 from array import array
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 

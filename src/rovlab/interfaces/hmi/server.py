@@ -40,7 +40,7 @@ import time
 import traceback
 from collections import deque
 from importlib import resources
-from typing import Any
+from typing import Any, Self
 from urllib.parse import urlsplit
 
 import numpy as np
@@ -303,7 +303,7 @@ class HmiServer:
                 self._anchor = (now, s.source.time)
             wall0, sim0 = self._anchor
             target = sim0 + (now - wall0) * speed  # source time that is due now
-            n = int(math.floor((target - s.source.time) / h + 1e-9)) + 1 if target >= s.source.time - 1e-12 else 0
+            n = math.floor((target - s.source.time) / h + 1e-9) + 1 if target >= s.source.time - 1e-12 else 0
             if n * h / speed > 1.0:  # more than a second of wall time behind (suspended?): re-anchor
                 self.stats.slips += 1
                 self._anchor = (now, s.source.time)
@@ -465,7 +465,7 @@ class ServerThread:
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="rovlab-hmi", daemon=True)
 
-    def start(self, timeout: float = 30.0) -> "ServerThread":
+    def start(self, timeout: float = 30.0) -> Self:
         self._thread.start()
         if not self._ready.wait(timeout):
             raise RuntimeError("the HMI server did not start in time")
@@ -501,8 +501,8 @@ class ServerThread:
             self._loop.call_soon_threadsafe(self._loop.stop)
             self._thread.join(30.0)
 
-    def __enter__(self) -> "ServerThread":
+    def __enter__(self) -> Self:
         return self.start()
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()

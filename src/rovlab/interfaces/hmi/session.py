@@ -32,16 +32,17 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
-from rovlab.params.design import design_config_from_dict, resolve_config_path
-from rovlab.params.validate import ConfigError, Problem, read_toml
-from rovlab.params.vehicle import resolve_vehicle_path, vehicle_from_dict
 from rovlab.interfaces.hmi.documents import ParameterDocument
 from rovlab.interfaces.hmi.log import SessionLog, mcap_available
 from rovlab.interfaces.hmi.source import Message, SimulationSource, Source
+from rovlab.params.design import design_config_from_dict, resolve_config_path
+from rovlab.params.validate import ConfigError, Problem, read_toml
+from rovlab.params.vehicle import resolve_vehicle_path, vehicle_from_dict
 
 TARGETS = ("vehicle", "truth", "config")
 SPEED_RANGE = (0.1, 50.0)
@@ -103,7 +104,7 @@ class Session:
     @classmethod
     def simulation(cls, scenario: str = "step-process-model", *, vehicle: str | None = None,
                    config: str | None = None, seed: int | None = None, out_dir: str | Path = "out/hmi",
-                   speed: float = 1.0, running: bool = True) -> "Session":
+                   speed: float = 1.0, running: bool = True) -> Session:
         """A session on a packaged or user scenario, optionally with another vehicle/configuration.
 
         Raises ConfigError (file, key, value, expectation) if any file is invalid.
