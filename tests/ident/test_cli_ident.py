@@ -218,3 +218,27 @@ def test_step_update_can_keep_the_towing_damping(capsys, tmp_path, vehicle_copy)
     code, _, err = run(capsys, "identify", "step", log, "--mass", 7.31, "--no-plot", "--update", vehicle_copy)
     assert code == 0 and "equivalent linearisation" in err
     assert load_vehicle(vehicle_copy).damping_linear[0] < -4.03
+
+
+def test_step_dof_must_match_the_log_columns(capsys, tmp_path, vehicle_copy):
+    # A surge relay log (force_n, position_m) with --dof yaw would have written its added mass into
+    # N_rdot, and a yaw log without --dof into X_udot: refused, and the file left alone.
+    surge = tmp_path / "relay.csv"
+    run(capsys, "lab", "step", "--seed", 3, "--linear", "--out", surge)
+    before = vehicle_copy.read_text(encoding="utf-8")
+    code, _, err = run(capsys, "identify", "step", surge, "--mass", 7.31, "--dof", "yaw", "--no-plot",
+                       "--update", vehicle_copy)
+    assert code == 2 and "--dof yaw needs the columns time_s, moment_nm, heading_rad" in err
+    yaw_log = tmp_path / "yaw-relay.csv"
+    run(capsys, "lab", "step", "--dof", "yaw", "--force", 0.3, "--amplitude", 1.0, "--seed", 4, "--linear",
+        "--out", yaw_log)
+    code, _, err = run(capsys, "identify", "step", yaw_log, "--mass", 0.16, "--dof", "surge", "--no-plot",
+                       "--update", vehicle_copy)
+    assert code == 2 and "use --dof yaw" in err and "Traceback" not in err
+    assert vehicle_copy.read_text(encoding="utf-8") == before
+    # without --dof the DOF follows the columns: a yaw log updates N_rdot (SPEC 2: -0.12 kg m^2)
+    data = run_json(capsys, "identify", "step", yaw_log, "--mass", 0.16, "--no-plot", "--update", vehicle_copy,
+                    "--added-mass-only")
+    assert data["dof"] == "yaw"
+    v = load_vehicle(vehicle_copy)
+    assert v.added_mass[3] == pytest.approx(-0.12, rel=0.05) and v.added_mass[0] == -5.50

@@ -83,7 +83,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file")
     p.add_argument("--mass", type=float, required=True, metavar="KG",
                    help="rigid-body mass m (I_zz in kg m^2 for yaw)")
-    p.add_argument("--dof", choices=("surge", "sway", "heave", "yaw"), default="surge", help="DOF (for --update)")
+    p.add_argument("--dof", choices=("surge", "sway", "heave", "yaw"),
+                   help="DOF (for --update); default: yaw for a moment_nm/heading_rad log, surge otherwise")
     p.add_argument("--fit-bias", action="store_true",
                    help="fit a constant unlogged force (net buoyancy in heave, tether pull)")
     p.add_argument("--added-mass-only", action="store_true",
@@ -382,8 +383,17 @@ def _cmd_step(args: argparse.Namespace) -> int:
     from rovlab.ident import plots, step
 
     table, t, f, x = step.read_step(args.file)
+    # read_step took the yaw columns (moment_nm, heading_rad) or the translational ones (force_n,
+    # position_m): the DOF must agree, or --update would write e.g. a surge test into N_rdot
+    yaw = not table.has("position_m")
+    if args.dof is None:
+        args.dof = "yaw" if yaw else "surge"
+    elif yaw != (args.dof == "yaw"):
+        have = "time_s, moment_nm, heading_rad (a yaw log)" if yaw else "time_s, force_n, position_m (a surge, sway or heave log)"
+        need = ("time_s, moment_nm, heading_rad" if args.dof == "yaw" else "time_s, force_n, position_m")
+        raise _user_error(f"{args.file}: --dof {args.dof} needs the columns {need}, but the file has {have}; "
+                          f"use --dof {'yaw' if yaw else 'surge, sway or heave'}")
     fit = _run(args.file, lambda: step.fit_step_response(t, f, x, mass=args.mass, bias=args.fit_bias))
-    yaw = args.dof == "yaw" or table.has("heading_rad")
     png = _plot(args, "step", lambda p: plots.plot_step(
         fit, p, title=f"Relay/step response ({args.dof}): {Path(args.file).name}",
         position_unit="rad" if yaw else "m", force_unit="N m" if yaw else "N",
@@ -411,7 +421,7 @@ def _cmd_step(args: argparse.Namespace) -> int:
         f"  with m = {args.mass:g}: added mass {key} = m - 1/k = {_pm(fit.added_mass, se['added_mass'])} (SNAME)",
         f"  linear damping = -a/k = {_pm(fit.linear_damping, se['linear_damping'])} (SNAME)",
     ] + ([f"  force bias = {_pm(fit.bias, se['bias'])}"] if fit.bias_fitted else []) + [
-        f"  fit {fit.fit_percent:.2f} %, RMS position residual {fit.rms:.3g}",
+        f"  fit {fit.fit_percent:.2f} %, RMS position residual {fit.rms:.3g} {'rad' if yaw else 'm'}",
         "  note: a linear model; nonlinear damping makes these an equivalent linearisation at the test's speeds",
     ] + ([f"  figure: {png}"] if png else []))
     _emit(args, data, text)
