@@ -242,3 +242,30 @@ def test_step_dof_must_match_the_log_columns(capsys, tmp_path, vehicle_copy):
     assert data["dof"] == "yaw"
     v = load_vehicle(vehicle_copy)
     assert v.added_mass[3] == pytest.approx(-0.12, rel=0.05) and v.added_mass[0] == -5.50
+
+
+def test_plot_names_are_checked_and_written_exactly(capsys, tmp_path):
+    # an unknown suffix used to end in a matplotlib traceback, and a name without one was written
+    # as NAME.png while the output reported NAME
+    log = tmp_path / "rest.csv"
+    run(capsys, "lab", "noise", "--seed", 1, "--samples", 200, "--out", log)
+    for bad in (tmp_path / "fig.txt", tmp_path / "fig"):
+        code, _, err = run(capsys, "identify", "noise", log, "--plot", bad)
+        assert code == 2 and "must end in .png, .svg, .pdf" in err and "Traceback" not in err
+    (tmp_path / "dir.png").mkdir()
+    code, _, err = run(capsys, "identify", "noise", log, "--plot", tmp_path / "dir.png")
+    assert code == 2 and "is a directory" in err
+    data = run_json(capsys, "identify", "noise", log, "--plot", tmp_path / "fig.svg")
+    assert data["plot"] == str(tmp_path / "fig.svg")
+    assert (tmp_path / "fig.svg").read_text(encoding="utf-8").lstrip().startswith("<?xml")
+
+
+def test_run_errors_name_the_file_once_and_yaw_tables_say_rate_and_moment(capsys, tmp_path):
+    few = tmp_path / "short.csv"
+    run(capsys, "lab", "towing", "--seed", 1, "--hold-s", 3, "--out", few)
+    code, _, err = run(capsys, "identify", "towing", few, "--no-plot")
+    assert code == 2 and err.count("short.csv") == 1 and "run 1: the steady part" in err
+    runs = tmp_path / "yaw.csv"
+    run(capsys, "lab", "yaw", "--seed", 6, "--duration-s", 15, "--out", runs)
+    code, out, _ = run(capsys, "identify", "yaw", runs, "--no-plot")
+    assert code == 0 and "rate       moment" in out and "(rad/s, N m)" in out

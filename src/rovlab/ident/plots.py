@@ -32,9 +32,15 @@ def _figure(rows: int, cols: int = 1, *, height: float = 2.6, width: float = 8.0
     return fig, axes
 
 
+FORMATS = (".png", ".svg", ".pdf")
+
+
 def _save(fig: Any, path: str | Path) -> Path:
+    """Write exactly ``path`` in the format its suffix names (.png, .svg or .pdf)."""
     path = Path(path)
-    fig.savefig(path, dpi=110)
+    if path.suffix.lower() not in FORMATS:
+        raise ValueError(f"a figure file must end in {', '.join(FORMATS)}; got {str(path)!r}")
+    fig.savefig(path, dpi=110, format=path.suffix.lower()[1:])
     return path
 
 

@@ -183,7 +183,8 @@ def _run(file: str, fn: Callable[[], Any]) -> Any:
     try:
         return fn()
     except IdentificationError as exc:
-        raise _user_error(f"{file}: {exc}") from None
+        text = str(exc)  # messages about a run already start with the file's name
+        raise _user_error(text if text.startswith(f"{file}:") else f"{file}: {text}") from None
 
 
 def _clean(x: Any) -> Any:
@@ -208,6 +209,7 @@ def _emit(args: argparse.Namespace, data: dict[str, Any], text: str) -> None:
 
 def _plot(args: argparse.Namespace, tool: str, draw: Callable[[Path], Any]) -> str | None:
     """Write the figure (default next to the input file); a missing matplotlib only warns."""
+    from rovlab.ident import plots
     from rovlab.ident.plots import PlotUnavailable
 
     if getattr(args, "no_plot", False):
@@ -219,6 +221,10 @@ def _plot(args: argparse.Namespace, tool: str, draw: Callable[[Path], Any]) -> s
         path = src.with_name(f"{src.stem}-{tool}.png")
     else:
         return None
+    if path.suffix.lower() not in plots.FORMATS:
+        raise _user_error(f"--plot {path}: a figure file must end in {', '.join(plots.FORMATS)}")
+    if path.is_dir():
+        raise _user_error(f"--plot {path}: is a directory; give a file name such as {path / (tool + '.png')}")
     try:
         draw(path)
     except PlotUnavailable as exc:
@@ -339,7 +345,10 @@ def _damping_text(fit, file: str, label: str) -> str:
     for t in fit.terms:
         lines.append(f"  {t:9s} = {_pm(getattr(fit, t), fit.stderr[t])} {units[t]}")
     lines.append(f"  RMS residual {fit.rms:.4g} {fit.unit}")
-    lines.append("  run   speed      force       window")
+    if fit.dof == "yaw":
+        lines.append("  run   rate       moment      window      (rad/s, N m)")
+    else:
+        lines.append("  run   speed      force       window      (m/s, N)")
     for p in fit.points:
         lines.append(f"  {p.run:<4d} {p.speed:+.4f}  {p.force:+9.4f}   {p.start_s:7.2f}-{p.end_s:.2f} s")
     return "\n".join(lines)
