@@ -269,3 +269,54 @@ def test_run_errors_name_the_file_once_and_yaw_tables_say_rate_and_moment(capsys
     run(capsys, "lab", "yaw", "--seed", 6, "--duration-s", 15, "--out", runs)
     code, out, _ = run(capsys, "identify", "yaw", runs, "--no-plot")
     assert code == 0 and "rate       moment" in out and "(rad/s, N m)" in out
+
+
+@pytest.mark.parametrize("argv, needle", [
+    # values that used to be accepted silently (negative noise, NaN moments, a negative trim) or
+    # to end in a traceback (--rate-hz inf) or to run for hours (--duration-s 1e7)
+    (["lab", "thrust", "--noise-n", "-1"], "argument --noise-n: expected a non-negative number"),
+    (["lab", "thrust", "--rate-hz", "inf"], "argument --rate-hz: expected a finite number"),
+    (["lab", "thrust", "--pwm-step", "nan"], "argument --pwm-step: expected a finite number"),
+    (["lab", "thrust", "--pwm-start", "500"], "leaves thruster T1's PWM range 1300..1700 us"),
+    (["lab", "thrust", "--seed", "-1"], "argument --seed: expected a seed of 0 or more"),
+    (["lab", "towing", "--speeds", "nan,0.1"], "--speeds: expected comma-separated finite numbers"),
+    (["lab", "towing", "--hold-s", "0"], "argument --hold-s: expected a positive number"),
+    (["lab", "yaw", "--moments", "0,1"], "moments must be a non-zero finite number"),
+    (["lab", "yaw", "--moment-error", "nan"], "argument --moment-error: expected a finite number"),
+    (["lab", "step", "--force", "nan"], "argument --force: expected a finite number"),
+    (["lab", "step", "--duration-s", "1e7"], "more than the 2000000 a lab file may have"),
+    (["lab", "noise", "--rate-hz", "0"], "argument --rate-hz: expected a positive number"),
+    (["lab", "noise", "--samples", "100000000"], "more than the 2000000 a lab file may have"),
+])
+def test_lab_refuses_bad_settings(capsys, tmp_path, argv, needle):
+    out = tmp_path / "x.csv"
+    try:
+        code = main([str(a) for a in argv] + ["--out", str(out)])
+    except SystemExit as exc:  # argparse: usage and the message
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and needle in err and "Traceback" not in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["identify", "towing", "{towing}", "--trim", "-1"], "argument --trim: expected a non-negative number"),
+    (["identify", "towing", "{towing}", "--min-steady", "nan"], "argument --min-steady: expected a finite number"),
+    (["identify", "thrust", "{towing}", "--max-force", "0"], "argument --max-force: expected a positive number"),
+    (["identify", "thrust", "{towing}", "--deadband", "nan"], "argument --deadband: expected a finite number"),
+    (["identify", "step", "{towing}", "--mass", "-7"], "argument --mass: expected a positive number"),
+    (["added-mass", "--vehicle", "udrone", "--rho", "abc"], "argument --rho: expected a number, got 'abc'"),
+])
+def test_identify_refuses_bad_options(capsys, tmp_path, argv, needle):
+    towing = tmp_path / "t.csv"
+    towing.write_text("run,time_s,speed_mps,force_n\n1,0,0,0\n", encoding="utf-8")
+    with pytest.raises(SystemExit) as exc:  # argparse: exit status 2, usage and the message
+        main([a.format(towing=towing) for a in argv])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and needle in err
+
+
+def test_added_mass_in_millimetres_gets_a_note(capsys):
+    code, _, err = run(capsys, "added-mass", "--length", 482, "--width", 333, "--height", 287,
+                       "--area-front", 55915, "--area-side", 102378, "--area-top", 117375, "--json")
+    assert code == 0 and "were they given in millimetres?" in err

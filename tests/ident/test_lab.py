@@ -97,3 +97,26 @@ def test_resting_log_has_every_sensor_channel(udrone_vehicle):
     expected = [f"{ch}_{s.name}" for s in udrone_vehicle.sensors for ch in s.variance]
     assert names == expected
     assert d.columns["time_s"][1] == pytest.approx(0.1)  # 10 Hz as in the vehicle file
+
+
+def test_settings_are_checked_by_the_python_api_too(udrone_vehicle):
+    # the CLI checks its options; the functions check theirs, naming the parameter
+    with pytest.raises(ValueError, match="noise_std_n must be a non-negative finite number, got -1"):
+        lab.thrust_rig(udrone_vehicle, "T1", seed=1, noise_std_n=-1.0)
+    with pytest.raises(ValueError, match="towing speeds must be a non-zero finite number, got nan"):
+        lab.towing_runs(udrone_vehicle, "surge", seed=1, speeds=(0.1, float("nan")))
+    with pytest.raises(ValueError, match="moments must be a non-zero finite number, got 0"):
+        lab.yaw_runs(udrone_vehicle, seed=1, moments=(0.0, 1.0))
+    with pytest.raises(ValueError, match="relay force must be a positive finite number, got nan"):
+        lab.relay_test(udrone_vehicle, "surge", seed=1, force=float("nan"))
+    with pytest.raises(ValueError, match="rate_hz must be a positive finite number, got 0"):
+        lab.resting_log(udrone_vehicle, seed=1, rate_hz=0.0)
+    with pytest.raises(ValueError, match="relay log would have 1e\\+08 rows"):
+        lab.relay_test(udrone_vehicle, "surge", seed=1, duration_s=1e7)
+
+
+def test_thrusters_with_different_curves_on_one_rig_are_flagged(udrone_vehicle):
+    same = lab.thrust_rig(udrone_vehicle, ["T1", "T2"], seed=1, step_s=2.0)
+    mixed = lab.thrust_rig(udrone_vehicle, ["T1", "T3"], seed=1, step_s=2.0)  # SPEC 2: T3 has its own curve
+    assert not any("do not share one thrust curve" in n for n in same.notes)
+    assert any("do not share one thrust curve" in n for n in mixed.notes)

@@ -81,6 +81,29 @@ def new_seed() -> int:
     return int(np.random.SeedSequence().entropy % (2**32))
 
 
+MAX_ROWS = 2_000_000  # more rows than this is a typo (and a long wait), not an experiment
+
+
+def _number(name: str, value: float, *, positive: bool = False, nonnegative: bool = False,
+            nonzero: bool = False) -> float:
+    """``value`` as a float, or ValueError naming the parameter and what it must be."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    ok = math.isfinite(x) and (not positive or x > 0) and (not nonnegative or x >= 0) and (not nonzero or x != 0)
+    if not ok:
+        kind = "positive" if positive else "non-negative" if nonnegative else "non-zero" if nonzero else "finite"
+        raise ValueError(f"{name} must be a {kind} finite number, got {x:g}")
+    return x
+
+
+def _check_rows(rows: float, what: str) -> None:
+    if rows > MAX_ROWS:
+        raise ValueError(f"the {what} would have {rows:.3g} rows, more than the {MAX_ROWS} a lab file may have; "
+                         "shorten the experiment or lower the sampling rate")
+
+
 def _rng(seed: int | None) -> tuple[np.random.Generator, int]:
     s = new_seed() if seed is None else int(seed)
     return np.random.default_rng(s), s
@@ -130,8 +153,21 @@ def thrust_rig(vehicle: Vehicle, thrusters: Sequence[str] | str | None = None, *
     names = [thrusters] if isinstance(thrusters, str) else list(thrusters or [vehicle.thrusters[0].name])
     for n in names:
         vehicle.thruster(n)  # KeyError with the list of names
-    if pwm_step <= 0 or step_s <= 0 or rate_hz <= 0:
-        raise ValueError("pwm_step, step_s and rate_hz must be positive")
+    pwm_start = _number("pwm_start", pwm_start, positive=True)
+    pwm_stop = _number("pwm_stop", pwm_stop, positive=True)
+    pwm_step = _number("pwm_step", pwm_step, positive=True)
+    step_s = _number("step_s", step_s, positive=True)
+    rate_hz = _number("rate_hz", rate_hz, positive=True)
+    command_tau_s = _number("command_tau_s", command_tau_s, nonnegative=True)
+    cell_tau_s = _number("cell_tau_s", cell_tau_s, nonnegative=True)
+    noise_std_n = _number("noise_std_n", noise_std_n, nonnegative=True)
+    for n in names:
+        thr = vehicle.thruster(n)
+        lo, hi = min(pwm_start, pwm_stop), max(pwm_start, pwm_stop)
+        if lo < thr.pwm_min_us or hi > thr.pwm_max_us:
+            raise ValueError(f"the staircase {pwm_start:g} -> {pwm_stop:g} us leaves thruster {n}'s PWM range "
+                             f"{thr.pwm_min_us:g}..{thr.pwm_max_us:g} us")
+    _check_rows((abs(pwm_stop - pwm_start) / pwm_step + 1) * step_s * rate_hz, "thrust log")
     sign = 1.0 if pwm_stop >= pwm_start else -1.0
     levels = np.arange(pwm_start, pwm_stop + sign * 1e-9, sign * pwm_step)
     h = 1.0 / rate_hz
@@ -151,6 +187,14 @@ def thrust_rig(vehicle: Vehicle, thrusters: Sequence[str] | str | None = None, *
                               "not a quadratic curve",)
     if len(names) > 1:
         notes += (f"{len(names)} thrusters on the rig together ({', '.join(names)}): identify with --pair {len(names)}",)
+        def curve_of(t: Any) -> tuple:
+            c = t.curve
+            coefs = (c.K_L_pos, c.K_NL_pos, c.K_L_neg, c.K_NL_neg) if c is not None else None
+            return (t.model, coefs, t.table, t.voltage, t.deadband_us, t.pwm_neutral_us)
+
+        if any(curve_of(vehicle.thruster(n)) != curve_of(thr) for n in names[1:]):
+            notes += (f"{', '.join(names)} do not share one thrust curve: --pair fits their average, and the truth "
+                      f"above is {names[0]}'s",)
     return LabData("thrust", {"time_s": t, "pwm_us": setpoint, "force_n": cell}, truth,
                    {"thrusters": ",".join(names), "pwm_start": pwm_start, "pwm_stop": pwm_stop, "pwm_step": pwm_step,
                     "step_s": step_s, "rate_hz": rate_hz, "command_tau_s": command_tau_s, "cell_tau_s": cell_tau_s,
@@ -192,8 +236,19 @@ def towing_runs(vehicle: Vehicle, dof: str = "surge", *, seed: int | None = None
     """
     if dof not in ("surge", "sway", "heave"):
         raise ValueError(f"towing DOF must be surge, sway or heave, got {dof!r}")
-    if len(speeds) == 0 or any(s == 0 for s in speeds):
-        raise ValueError("towing speeds must be non-zero")
+    if len(speeds) == 0:
+        raise ValueError("towing needs at least one speed")
+    speeds = [_number("towing speeds", s, nonzero=True) for s in speeds]
+    rate_hz = _number("rate_hz", rate_hz, positive=True)
+    rest_s = _number("rest_s", rest_s, nonnegative=True)
+    accel_mps2 = _number("accel_mps2", accel_mps2, positive=True)
+    hold_s = _number("hold_s", hold_s, positive=True)
+    for name, value in (("rig_linear", rig_linear), ("rig_quadratic", rig_quadratic)):
+        _number(name, value)
+    for name, value in (("cell_tau_s", cell_tau_s), ("noise_std_n", noise_std_n),
+                        ("speed_noise_mps", speed_noise_mps), ("offset_std_n", offset_std_n)):
+        _number(name, value, nonnegative=True)
+    _check_rows(sum(2 * rest_s + 2 * abs(v) / accel_mps2 + hold_s for v in speeds) * rate_hz, "towing log")
     rng, seed = _rng(seed)
     i = DOF4.index(dof)
     lin, quad, cub = (float(vehicle.damping_linear[i]), float(vehicle.damping_quadratic[i]),
@@ -306,10 +361,17 @@ def yaw_runs(vehicle: Vehicle, *, seed: int | None = None, moments: Sequence[flo
     it by a random factor per run (relative standard deviation ``moment_error``: open-loop
     allocation and thrust-curve errors, which the thesis names as the main limit of this test).
     """
+    if len(moments) == 0:
+        raise ValueError("yaw runs need at least one moment")
+    moments = [_number("moments", m, nonzero=True) for m in moments]
+    rest_s = _number("rest_s", rest_s, nonnegative=True)
+    duration_s = _number("duration_s", duration_s, positive=True)
+    moment_error = _number("moment_error", moment_error, nonnegative=True)
     rng, seed = _rng(seed)
     var, rate, note = _position_variance(vehicle, "yaw")
-    var = var if heading_variance is None else heading_variance
-    rate = rate if rate_hz is None else rate_hz
+    var = var if heading_variance is None else _number("heading_variance", heading_variance, nonnegative=True)
+    rate = rate if rate_hz is None else _number("rate_hz", rate_hz, positive=True)
+    _check_rows(len(moments) * (rest_s + duration_s) * rate, "yaw log")
     cols: dict[str, list[np.ndarray]] = {"run": [], "time_s": [], "moment_nm": [], "heading_rad": []}
     k_on = int(round(rest_s * rate))
     for run, m in enumerate(moments, start=1):
@@ -351,12 +413,15 @@ def relay_test(vehicle: Vehicle, dof: str = "surge", *, seed: int | None = None,
     """
     if dof not in DOF4:
         raise ValueError(f"DOF must be one of {', '.join(DOF4)}, got {dof!r}")
-    if force <= 0 or amplitude <= 0:
-        raise ValueError("relay force and amplitude must be positive")
+    force = _number("relay force", force, positive=True)
+    amplitude = _number("relay amplitude", amplitude, positive=True)
+    duration_s = _number("duration_s", duration_s, positive=True)
+    buoyancy_error_n = _number("buoyancy_error_n", buoyancy_error_n)
     rng, seed = _rng(seed)
     var, rate, note = _position_variance(vehicle, dof)
-    var = var if position_variance is None else position_variance
-    rate = rate if rate_hz is None else rate_hz
+    var = var if position_variance is None else _number("position_variance", position_variance, nonnegative=True)
+    rate = rate if rate_hz is None else _number("rate_hz", rate_hz, positive=True)
+    _check_rows(duration_s * rate, "relay log")
     truth_vehicle = _integration_vehicle(vehicle, dof, linear)
     trim = (vehicle.buoyancy - vehicle.weight) if dof == "heave" else 0.0
     extra = -buoyancy_error_n if dof == "heave" else 0.0
@@ -414,8 +479,11 @@ def resting_log(vehicle: Vehicle, *, seed: int | None = None, samples: int = 679
         raise ValueError(f"vehicle {vehicle.name!r} has no [[sensors]] to log")
     if samples < 2:
         raise ValueError("a resting log needs at least 2 samples")
+    _check_rows(samples, "resting log")
+    drift_sigmas = _number("drift_sigmas", drift_sigmas, nonnegative=True)
     rng, seed = _rng(seed)
-    rate = rate_hz if rate_hz is not None else max(s.rate_hz for s in vehicle.sensors)
+    rate = (_number("rate_hz", rate_hz, positive=True) if rate_hz is not None
+            else max(s.rate_hz for s in vehicle.sensors))
     t = np.arange(samples) / rate
     cols: dict[str, np.ndarray] = {"time_s": t}
     truth: dict[str, float] = {}

@@ -22,6 +22,41 @@ SIGN_NOTE = ("Coefficients use SNAME signs: added mass and damping derivatives a
              "(X_udot = -5.5 means 5.5 kg of added mass).")
 
 
+def _number(kind: str) -> Callable[[str], float]:
+    """An argparse type: a finite number, optionally positive or non-negative (bad values exit 2
+    with 'argument --OPTION: expected ...')."""
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not math.isfinite(x):
+            raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+        if kind == "positive" and not x > 0:
+            raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+        if kind == "non-negative" and not x >= 0:
+            raise argparse.ArgumentTypeError(f"expected a non-negative number, got {text!r}")
+        return x
+
+    parse.__name__ = f"{kind} number"
+    return parse
+
+
+def _seed(text: str) -> int:
+    try:
+        seed = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if seed < 0:
+        raise argparse.ArgumentTypeError(f"expected a seed of 0 or more, got {text!r}")
+    return seed
+
+
+_finite = _number("finite")
+_positive = _number("positive")
+_nonnegative = _number("non-negative")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--json", action="store_true", help="machine-readable output on stdout")
@@ -46,14 +81,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--table", action="store_true", help="FILE is a static table, not a time series")
     p.add_argument("--pair", type=int, default=1, metavar="N",
                    help="N identical thrusters were on the rig together: divide the force by N")
-    p.add_argument("--window", type=float, default=5.0, metavar="S", help="average the last S seconds of each step (5)")
-    p.add_argument("--cutoff", type=float, default=1.0, metavar="HZ", help="Butterworth cut-off frequency (1 Hz)")
+    p.add_argument("--window", type=_positive, default=5.0, metavar="S", help="average the last S seconds of each step (5)")
+    p.add_argument("--cutoff", type=_positive, default=1.0, metavar="HZ", help="Butterworth cut-off frequency (1 Hz)")
     dead = p.add_mutually_exclusive_group()
-    dead.add_argument("--deadband", type=float, default=25.0, metavar="US", help="fixed dead band (25 us)")
+    dead.add_argument("--deadband", type=_nonnegative, default=25.0, metavar="US", help="fixed dead band (25 us)")
     dead.add_argument("--fit-deadband", action="store_true", help="fit the dead band too")
-    p.add_argument("--neutral", type=float, default=1500.0, metavar="US", help="neutral PWM (1500 us)")
-    p.add_argument("--range", type=float, nargs=2, metavar=("LO", "HI"), help="use only points with LO <= pwm <= HI")
-    p.add_argument("--max-force", type=float, metavar="N", help="drop points with |thrust| above N newtons")
+    p.add_argument("--neutral", type=_positive, default=1500.0, metavar="US", help="neutral PWM (1500 us)")
+    p.add_argument("--range", type=_finite, nargs=2, metavar=("LO", "HI"), help="use only points with LO <= pwm <= HI")
+    p.add_argument("--max-force", type=_positive, metavar="N", help="drop points with |thrust| above N newtons")
     p.add_argument("--thruster", metavar="NAME[,NAME]", help="thruster(s) to update (required with --update)")
     p.set_defaults(func=_cmd_thrust)
 
@@ -64,8 +99,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rig", metavar="FILE", help="rig-only runs (same columns) whose drag is subtracted")
     p.add_argument("--terms", default="linear,quadratic,cubic", help="terms to fit (default linear,quadratic,cubic)")
     p.add_argument("--dof", choices=("surge", "sway", "heave"), default="surge", help="DOF towed (for --update)")
-    p.add_argument("--min-steady", type=float, default=2.0, metavar="S", help="shortest usable steady window (2 s)")
-    p.add_argument("--trim", type=float, default=1.0, metavar="S", help="seconds cut from each end of a window (1)")
+    p.add_argument("--min-steady", type=_positive, default=2.0, metavar="S", help="shortest usable steady window (2 s)")
+    p.add_argument("--trim", type=_nonnegative, default=1.0, metavar="S", help="seconds cut from each end of a window (1)")
     p.add_argument("--no-tare", action="store_true", help="do not subtract the force at rest around each run")
     p.set_defaults(func=_cmd_towing)
 
@@ -73,7 +108,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         description="Columns: run, time_s, moment_nm, heading_rad (wrapped or not). " + SIGN_NOTE)
     p.add_argument("file")
     p.add_argument("--terms", default="linear,quadratic", help="terms to fit (default linear,quadratic)")
-    p.add_argument("--min-steady", type=float, default=2.0, metavar="S", help="shortest usable steady window (2 s)")
+    p.add_argument("--min-steady", type=_positive, default=2.0, metavar="S", help="shortest usable steady window (2 s)")
     p.set_defaults(func=_cmd_yaw)
 
     p = isub.add_parser("step", parents=[common], help="added mass and linear damping from a step/relay response",
@@ -81,7 +116,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "position_m (or time_s, moment_nm, heading_rad for yaw). Reports gain k, pole a, "
                                     "added_mass = m - 1/k and linear_damping = -a/k, both SNAME-signed (negative).")
     p.add_argument("file")
-    p.add_argument("--mass", type=float, required=True, metavar="KG",
+    p.add_argument("--mass", type=_positive, required=True, metavar="KG",
                    help="rigid-body mass m (I_zz in kg m^2 for yaw)")
     p.add_argument("--dof", choices=("surge", "sway", "heave", "yaw"),
                    help="DOF (for --update); default: yaw for a moment_nm/heading_rad log, surge otherwise")
@@ -106,8 +141,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "or --vehicle to use its [geometry]. " + SIGN_NOTE)
     for name, unit in (("length", "M"), ("width", "M"), ("height", "M"), ("area-front", "M2"), ("area-side", "M2"),
                        ("area-top", "M2")):
-        am.add_argument(f"--{name}", type=float, metavar=unit)
-    am.add_argument("--rho", type=float, metavar="KG/M3", help="water density (1000, or the vehicle's)")
+        am.add_argument(f"--{name}", type=_positive, metavar=unit)
+    am.add_argument("--rho", type=_positive, metavar="KG/M3", help="water density (1000, or the vehicle's)")
     am.add_argument("--vehicle", metavar="NAME|FILE", help="take the geometry from this vehicle")
     am.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     am.add_argument("--plot", metavar="PNG", help="write the DNV tables with the points used")
@@ -121,48 +156,48 @@ def register(sub: argparse._SubParsersAction) -> None:
     lsub.required = True
     lcommon = argparse.ArgumentParser(add_help=False)
     lcommon.add_argument("--vehicle", default="udrone", metavar="NAME|FILE", help="packaged name or TOML file (udrone)")
-    lcommon.add_argument("--seed", type=int, help="random seed (default: a fresh one, printed)")
+    lcommon.add_argument("--seed", type=_seed, help="random seed, 0 or more (default: a fresh one, printed)")
     lcommon.add_argument("--out", required=True, metavar="FILE", help="CSV file to write")
     lcommon.add_argument("--json", action="store_true", help="print what was written as JSON")
 
     p = lsub.add_parser("thrust", parents=[lcommon], help="load-cell PWM staircase")
     p.add_argument("--thruster", metavar="NAME[,NAME]", help="thruster(s) on the rig (default: the first)")
-    p.add_argument("--pwm-start", type=float, default=1300.0)
-    p.add_argument("--pwm-stop", type=float, default=1700.0)
-    p.add_argument("--pwm-step", type=float, default=10.0)
-    p.add_argument("--step-s", type=float, default=30.0, help="seconds per step (30)")
-    p.add_argument("--rate-hz", type=float, default=50.0)
-    p.add_argument("--noise-n", type=float, default=0.3, help="load-cell white noise std [N]")
+    p.add_argument("--pwm-start", type=_positive, default=1300.0)
+    p.add_argument("--pwm-stop", type=_positive, default=1700.0)
+    p.add_argument("--pwm-step", type=_positive, default=10.0)
+    p.add_argument("--step-s", type=_positive, default=30.0, help="seconds per step (30)")
+    p.add_argument("--rate-hz", type=_positive, default=50.0)
+    p.add_argument("--noise-n", type=_nonnegative, default=0.3, help="load-cell white noise std [N]")
     p.set_defaults(func=_cmd_lab_thrust)
 
     p = lsub.add_parser("towing", parents=[lcommon], help="towing-carriage runs and rig-only runs")
     p.add_argument("--dof", choices=("surge", "sway", "heave"), default="surge")
     p.add_argument("--speeds", help="comma-separated speeds [m/s] (default +-0.1..0.5)")
-    p.add_argument("--hold-s", type=float, default=15.0, help="seconds at constant speed (15)")
-    p.add_argument("--noise-n", type=float, default=0.15, help="load-cell white noise std [N]")
+    p.add_argument("--hold-s", type=_positive, default=15.0, help="seconds at constant speed (15)")
+    p.add_argument("--noise-n", type=_nonnegative, default=0.15, help="load-cell white noise std [N]")
     p.add_argument("--rig-out", metavar="FILE", help="rig-only runs (default: <out stem>-rig.csv)")
     p.set_defaults(func=_cmd_lab_towing)
 
     p = lsub.add_parser("yaw", parents=[lcommon], help="constant-moment yaw runs")
     p.add_argument("--moments", help="comma-separated moments [N m] (default 0.25,0.5,0.75,1,2)")
-    p.add_argument("--duration-s", type=float, default=30.0)
-    p.add_argument("--moment-error", type=float, default=0.0,
+    p.add_argument("--duration-s", type=_positive, default=30.0)
+    p.add_argument("--moment-error", type=_nonnegative, default=0.0,
                    help="relative std of the applied moment per run (allocation error; 0)")
     p.set_defaults(func=_cmd_lab_yaw)
 
     p = lsub.add_parser("step", parents=[lcommon], help="relay test observed by motion capture")
     p.add_argument("--dof", choices=("surge", "sway", "heave", "yaw"), default="surge")
-    p.add_argument("--force", type=float, default=2.0, help="relay force [N] (moment [N m] for yaw)")
-    p.add_argument("--amplitude", type=float, default=0.3, help="switching position [m] (rad for yaw)")
-    p.add_argument("--duration-s", type=float, default=60.0)
+    p.add_argument("--force", type=_positive, default=2.0, help="relay force [N] (moment [N m] for yaw)")
+    p.add_argument("--amplitude", type=_positive, default=0.3, help="switching position [m] (rad for yaw)")
+    p.add_argument("--duration-s", type=_positive, default=60.0)
     p.add_argument("--linear", action="store_true", help="linear damping only in the truth")
-    p.add_argument("--buoyancy-error", type=float, default=1.0, metavar="N",
+    p.add_argument("--buoyancy-error", type=_finite, default=1.0, metavar="N",
                    help="heave: how much more buoyant than the file the vehicle is (1 N)")
     p.set_defaults(func=_cmd_lab_step)
 
     p = lsub.add_parser("noise", parents=[lcommon], help="resting sensor log")
     p.add_argument("--samples", type=int, default=6796, help="samples (6796 as in the thesis)")
-    p.add_argument("--rate-hz", type=float)
+    p.add_argument("--rate-hz", type=_positive)
     p.set_defaults(func=_cmd_lab_noise)
 
 
@@ -283,9 +318,12 @@ def _floats(text: str | None, what: str) -> list[float] | None:
     if text is None:
         return None
     try:
-        return [float(x) for x in text.split(",") if x.strip()]
+        values = [float(x) for x in text.split(",") if x.strip()]
     except ValueError:
         raise _user_error(f"{what}: expected comma-separated numbers, got {text!r}") from None
+    if not values or not all(math.isfinite(v) for v in values):
+        raise _user_error(f"{what}: expected comma-separated finite numbers, got {text!r}")
+    return values
 
 
 # --------------------------------------------------------------------------------------------
@@ -486,6 +524,9 @@ def _cmd_added_mass(args: argparse.Namespace) -> int:
             raise _user_error("added-mass needs " + ", ".join(missing) + " (or --vehicle NAME to use its geometry)")
         rho = args.rho if args.rho is not None else 1000.0
     est = _run("added-mass", lambda: added_mass.added_mass_dnv(**dims, rho=rho))  # type: ignore[arg-type]
+    if max(dims["length"], dims["width"], dims["height"]) > 20.0:  # type: ignore[type-var]
+        print(f"rovlab: note: the dimensions are read in metres (L, W, H = {dims['length']:g}, {dims['width']:g}, "
+              f"{dims['height']:g} m) and the areas in m^2; were they given in millimetres?", file=sys.stderr)
     png = None
     if args.plot:
         png = _plot(args, "added-mass", lambda p: plots.plot_added_mass(est, p))
