@@ -102,3 +102,17 @@ def test_thruster_mapping_allocates_heave_and_yaw():
     pwm = mapping.pwm_us([0.0, 0.5])
     assert pwm.shape == (6,) and np.all((pwm >= 1300) & (pwm <= 1700))
     assert mapping.allocate([0.0, 0.5]).achieved[5] == pytest.approx(0.5)
+
+
+def test_weights_without_a_stabilising_lqr_are_a_config_error():
+    # z and psi are pure integrators: with no weight on them the Riccati equation has no
+    # stabilising solution; that used to surface as numpy's "Singular matrix" traceback
+    from rovlab.params.design import design_config_from_dict, packaged_config_path
+    from rovlab.params.validate import ConfigError, read_toml
+
+    data = read_toml(packaged_config_path("thesis"))
+    data["lqr"] = {"source": "test", "Q_diag": [0.0, 0.0, 1.0, 1.0], "R_diag": [1.0, 1.0]}
+    config = design_config_from_dict(data, file="zero.toml")
+    with pytest.raises(ConfigError, match=r"zero.toml: lqr: got 'Q = diag\(0, 0, 1, 1\), R = diag\(1, 1\)'.*"
+                                          "stabilising discrete LQR"):
+        design_lqr_from_config(load_vehicle("udrone"), config)

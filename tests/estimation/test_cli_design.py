@@ -118,3 +118,12 @@ def test_filter_unwritable_output_is_a_clean_error(capsys, tmp_path):
     write_csv(log_path, _log(n=20))
     code, _, err = run(capsys, "filter", str(log_path), "--out", str(tmp_path / "no" / "such" / "est.csv"))
     assert code == 2 and "cannot write" in err
+
+
+def test_design_with_impossible_lqr_weights_is_a_clean_error(capsys, tmp_path):
+    text = packaged_config_path("default").read_text()
+    cfg = tmp_path / "zero.toml"
+    cfg.write_text(text.replace("input_weight = { Z = 0.1, N = 0.01 }",
+                                "input_weight = { Z = 0.1, N = 0.01 }\nstate_weight = { z = 0, psi = 0 }"))
+    code, _, err = run(capsys, "design", "--config", str(cfg))
+    assert code == 2 and "Traceback" not in err and "zero.toml: lqr" in err

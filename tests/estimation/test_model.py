@@ -129,3 +129,19 @@ def test_lqr_weights_forms():
     data["lqr"] = {"source": "test"}
     with pytest.raises(ConfigError, match="either Bryson"):
         design_config_from_dict(data)
+
+
+def test_values_that_overflow_are_refused_naming_the_file():
+    # used to end in NaN matrices (psd 1e300) or a ValueError traceback from the filter (std 1e300)
+    udrone = load_vehicle("udrone")
+    data = _config()
+    data["process_noise"] = dict(data["process_noise"], psd={"w": 1e300, "r": 1e300, "b_w": 1e300, "b_r": 1e300})
+    with pytest.raises(ConfigError, match=r"my.toml: sample_time, process_noise.*overflow"):
+        build_filter_model(udrone, design_config_from_dict(data, file="my.toml"))
+    data = _config(sample_time=1e9)
+    with pytest.raises(ConfigError, match="discretisation is finite"):
+        build_filter_model(udrone, design_config_from_dict(data, file="my.toml"))
+    data = _config()
+    data["initial"] = dict(data["initial"], std={"z": 1e300, "psi_deg": 10.0})
+    with pytest.raises(ConfigError, match=r"my.toml: initial.std.z: got 1e\+300"):
+        design_config_from_dict(data, file="my.toml")

@@ -32,6 +32,7 @@ from scipy.linalg import expm, solve_discrete_are
 
 from rovlab.models.linear import HeaveYawParams, control_model
 from rovlab.params.design import DesignConfig
+from rovlab.params.validate import ConfigError, Problem
 from rovlab.params.vehicle import Vehicle
 
 CONTROL_STATES = ("z", "psi", "w", "r")
@@ -123,6 +124,27 @@ def design_lqr(params: HeaveYawParams, h: float, Q: np.ndarray, R: np.ndarray, *
 
 
 def design_lqr_from_config(vehicle: Vehicle, config: DesignConfig) -> LQRDesign:
-    """The LQR of a filter/controller configuration (model values from the vehicle or the file)."""
+    """The LQR of a filter/controller configuration (model values from the vehicle or the file).
+
+    Weights for which no stabilising LQR exists (e.g. a zero weight on z or psi, which are pure
+    integrators: the Riccati equation then has no stabilising solution) raise a ConfigError that
+    names the file's [lqr] table, not a LinAlgError from deep inside scipy.
+    """
     params = HeaveYawParams.from_values(**config.model_values(vehicle))
-    return design_lqr(params, config.sample_time, config.lqr_Q, config.lqr_R, reference=config.reference_gain)
+    try:
+        with np.errstate(all="ignore"):
+            design = design_lqr(params, config.sample_time, config.lqr_Q, config.lqr_R,
+                                reference=config.reference_gain)
+        ok = (np.all(np.isfinite(design.K)) and np.all(np.isfinite(design.P))
+              and bool(np.all(np.abs(design.poles) < 1.0)))
+        reason = "the closed loop it gives is not stable" if not ok else ""
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        ok, reason = False, f"the Riccati equation failed: {exc}"
+    if not ok:
+        weights = ("Q = diag(" + ", ".join(f"{q:.4g}" for q in np.asarray(config.lqr_Q)) + "), R = diag("
+                   + ", ".join(f"{r:.4g}" for r in np.asarray(config.lqr_R)) + ")")
+        raise ConfigError([Problem(config.file or config.name, "lqr", weights,
+                                   "weights for which a stabilising discrete LQR exists: z and psi are pure "
+                                   "integrators and need positive weights (" + reason + ")")],
+                          "filter configuration")
+    return design

@@ -184,7 +184,15 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
     T_w, T_r = config.bias_time_constants(params.M_w, params.M_r)
     A, B, E = observer_model(params, T_w, T_r)
     W = config.W
-    disc = discretise(A, B, E, W, config.sample_time)
+    with np.errstate(all="ignore"):  # overflow is reported below, naming the file's values
+        disc = discretise(A, B, E, W, config.sample_time)
+    if not all(np.all(np.isfinite(M)) for M in (disc.Phi, disc.Delta, disc.Q)):
+        values = (f"h = {config.sample_time:g} s, psd = [" + ", ".join(f"{w:g}" for w in config.psd[2:])
+                  + f"], T = [{T_w:g}, {T_r:g}] s")
+        raise ConfigError([Problem(file, "sample_time, process_noise", values,
+            "values whose discretisation is finite (Phi, Delta and Van Loan's Q overflow: "
+            "check the sample time, the spectral densities and the bias time constants)")],
+            "filter configuration")
 
     channels: list[Channel] = []
     problems: list[Problem] = []

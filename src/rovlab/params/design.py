@@ -259,6 +259,11 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     sources["initial"] = it.string("source")
     x0 = _state_table(it, "state", _STATE_KEYS, nonnegative=False)
     std = _state_table(it, "std", _STATE_KEYS, nonnegative=True)
+    with np.errstate(over="ignore"):
+        huge = [k for k, (i, _) in _STATE_KEYS.items() if not np.isfinite(std[i] ** 2)]
+    for key in huge:  # P0 = diag(std^2) must be finite
+        i, factor = _STATE_KEYS[key]
+        it.problem(f"std.{key}", float(std[i] / factor), "a standard deviation whose square is finite")
     it.finish()
 
     defaults = _fusion_settings(top.table("fusion", required=False), FusionSettings(), col)
