@@ -127,3 +127,16 @@ def test_design_with_impossible_lqr_weights_is_a_clean_error(capsys, tmp_path):
                                 "input_weight = { Z = 0.1, N = 0.01 }\nstate_weight = { z = 0, psi = 0 }"))
     code, _, err = run(capsys, "design", "--config", str(cfg))
     assert code == 2 and "Traceback" not in err and "zero.toml: lqr" in err
+
+
+def test_filter_reports_faulty_samples(capsys, tmp_path):
+    cols = _log(n=60)
+    cols["z_pressure"][20] = np.inf  # a faulty sample (not a missing one)
+    log_path = tmp_path / "faulty.csv"
+    write_csv(log_path, cols)
+    code, out, err = run(capsys, "filter", str(log_path), "--out", str(tmp_path / "est.csv"))
+    assert code == 0, err
+    assert "pressure.z       60 samples, 59 used, 0 rejected by the gate, 1 not finite" in out
+    est = read_log(tmp_path / "est.csv")
+    assert est.text["status_z_pressure"][20] == "lost-nonfinite"
+    assert np.all(np.isfinite(est["z"]))

@@ -447,3 +447,18 @@ def test_scalar_joseph_update_kernel_against_numpy():
     kf_update_scalar(x1, P1, h, value, r, False, np.zeros(6), kf_workspace(6, 1))
     np.testing.assert_allclose(x1, x_ref, rtol=1e-12)
     np.testing.assert_allclose(P1, P_ref, rtol=1e-11, atol=1e-14)
+
+
+def test_consensus_does_not_let_two_sensors_with_the_same_garbage_overrule_the_model(filt, thesis_model):
+    # The consensus rule's guard: both depth sensors jump by the same metre (a shared fault, e.g. a
+    # logging offset). They agree with each other, but the jump fails even the widened gate, so
+    # both samples are rejected exactly as if they were missing.
+    t, u, y, _ = simulate(thesis_model, 200, seed=20)
+    jumped = y.copy()
+    jumped[100, :2] += 1.0
+    missing = y.copy()
+    missing[100, :2] = np.nan
+    run_j = filt.run(t, u, jumped)
+    run_m = filt.run(t, u, missing)
+    assert run_j.event[100, :2].tolist() == [2, 2]  # rejected
+    np.testing.assert_array_equal(run_j.x, run_m.x)

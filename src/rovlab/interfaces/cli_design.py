@@ -121,6 +121,7 @@ def _print_matrix(name: str, M: np.ndarray) -> None:
 # --------------------------------------------------------------------------------------------
 
 def _cmd_filter(args: argparse.Namespace) -> int:
+    from rovlab.estimation.fusion import EVENT_NONFINITE, EVENT_REJECTED, EVENT_USED, STATUS_LOST
     from rovlab.estimation.kalman import DepthHeadingFilter, steps_between
     from rovlab.interfaces.cli import UserError
     from rovlab.io.logs import read_log, write_csv
@@ -163,10 +164,12 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     if gaps:
         print(f"  {gaps} gap(s) in the log bridged by prediction", file=report)
     for j, c in enumerate(model.channels):
-        lost = run.status[:, j] >= 2
+        lost = run.status[:, j] >= STATUS_LOST
         samples = int(np.sum(~np.isnan(y[:, j])))
-        used = int(np.sum(run.event[:, j] == 1))
-        rejected = int(np.sum(run.event[:, j] == 2))
-        print(f"  {c.name:16s} {samples} samples, {used} used, {rejected} rejected by the gate; "
-              f"lost {100.0 * lost.mean():.1f}% of the time", file=report)
+        used = int(np.sum(run.event[:, j] == EVENT_USED))
+        rejected = int(np.sum(run.event[:, j] == EVENT_REJECTED))
+        faulty = int(np.sum(run.event[:, j] == EVENT_NONFINITE))
+        print(f"  {c.name:16s} {samples} samples, {used} used, {rejected} rejected by the gate"
+              + (f", {faulty} not finite" if faulty else "")
+              + f"; lost {100.0 * lost.mean():.1f}% of the time", file=report)
     return 0
