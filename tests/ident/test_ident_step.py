@@ -116,3 +116,15 @@ def test_vehicle_edits_name_the_dof():
     fit = step.fit_step_response(t, force, 0.05 * xu, mass=7.31)
     assert step.step_edits(fit, "sway") == {"added_mass.Y_vdot": pytest.approx(7.31 - 20.0, rel=1e-3),
                                             "damping.sway.linear": pytest.approx(-10.0, rel=1e-3)}
+
+
+def test_undamped_dof_gives_zero_not_positive_damping(lab_table, heavy_vehicle):
+    # bluerov2_heavy has N_r = 0 (linear truth: a = 0). Unconstrained, the fitted pole came out
+    # about -1e-6, i.e. a positive ("energy-creating") linear damping that the vehicle file
+    # refuses; a passive body has a >= 0.
+    data = lab.relay_test(heavy_vehicle, "yaw", seed=1, linear=True, force=0.3, amplitude=1.0)
+    fit = _fit(lab_table(data), heavy_vehicle.I_zz, bias=True)
+    assert fit.pole >= 0.0 and fit.linear_damping <= 0.0
+    assert fit.linear_damping == pytest.approx(0.0, abs=1e-4)
+    assert fit.added_mass == pytest.approx(heavy_vehicle.added_mass[3], rel=0.01)
+    assert np.all(np.isfinite(fit.velocity_fit))

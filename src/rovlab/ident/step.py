@@ -201,7 +201,12 @@ def fit_step_response(time_s: np.ndarray, force: np.ndarray, position: np.ndarra
             out = out + th[0] * th[4] * xb
         return out
 
-    sol = least_squares(lambda th: model(th) - y, theta0, x_scale="jac", method="lm", xtol=1e-12, ftol=1e-12)
+    # a >= 0: a passive body has no negative damping (SNAME: linear_damping = -a/k <= 0); an
+    # undamped DOF (e.g. bluerov2_heavy's N_r = 0) would otherwise come out slightly "negative"
+    lower = np.full(theta0.size, -np.inf)
+    lower[1] = 0.0
+    sol = least_squares(lambda th: model(th) - y, theta0, x_scale="jac", method="trf", bounds=(lower, np.inf),
+                        xtol=1e-12, ftol=1e-12)
     th = sol.x
     res = y - model(th)
     cov = covariance_from_jacobian(sol.jac, -res)
@@ -221,7 +226,8 @@ def fit_step_response(time_s: np.ndarray, force: np.ndarray, position: np.ndarra
     tk = h * np.arange(u.size)
     vel_fit = th[3] * np.exp(-a * tk) + k * vu
     if bias:
-        vel_fit = vel_fit + k * th[4] * (-np.expm1(-a * tk) / a)  # response to the constant bias
+        ramp = tk if a * h < 1e-12 else -np.expm1(-a * tk) / a  # (1 - e^{-a t})/a, t when a = 0
+        vel_fit = vel_fit + k * th[4] * ramp  # response to the constant bias
     denom = float(np.linalg.norm(y - y.mean()))
     return StepFit(
         gain=k, pole=a, x0=float(th[2]), v0=float(th[3]), bias=float(th[4]) if bias else 0.0, mass=float(mass),
