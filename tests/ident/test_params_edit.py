@@ -119,3 +119,12 @@ def test_unchanged_values_keep_their_spelling(udrone_copy):
     edit_vehicle_file(udrone_copy, {"thrusters[name=T1].deadband_us": 25.0, "thrusters[name=T1].model": "quadratic",
                                     "thrusters[name=T1].quadratic": {"K_L_pos": 0.0607}})
     assert udrone_copy.read_text(encoding="utf-8") == before  # 25 stays 25, 6.07e-2 stays 6.07e-2
+
+
+def test_directory_and_binary_targets_are_named(tmp_path):
+    with pytest.raises(ConfigError, match="got 'a directory'; expected a TOML file"):
+        edit_vehicle_file(tmp_path, {"mass": 7.0})
+    binary = tmp_path / "v.toml"
+    binary.write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(ConfigError, match="undecodable bytes"):
+        edit_vehicle_file(binary, {"mass": 7.0})

@@ -305,8 +305,11 @@ def edit_toml_file(path: str | Path, values: Mapping[str, Any], *, sources: Mapp
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ConfigError([Problem(str(path), "", "no such file", "an existing TOML file")]) from None
-    except (IsADirectoryError, UnicodeDecodeError) as exc:
-        raise ConfigError([Problem(str(path), "", type(exc).__name__, "a UTF-8 TOML file")]) from None
+    except IsADirectoryError:
+        raise ConfigError([Problem(str(path), "", "a directory", "a TOML file")]) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError([Problem(str(path), "", "undecodable bytes",
+                                   f"a UTF-8 TOML file ({exc.reason} at byte {exc.start})")]) from None
     new_text, checked = edit_toml_text(text, values, sources=sources, source_mode=source_mode,
                                        file=str(path), validate=validate)
     atomic_write_text(Path(output) if output is not None else path, new_text)
