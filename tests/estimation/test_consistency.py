@@ -56,3 +56,19 @@ def test_filter_is_consistent_on_its_own_model():
     res = check(stats, dof=6)
     assert res.consistent() and abs(res.mean - 6.0) < 0.6
     assert check(nis_z, dof=1).consistent()
+
+
+def test_steps_with_fewer_runs_use_the_wider_interval():
+    # 50 runs of a 1-dof statistic; at step 1 only 2 runs have a value. Their average (3.0) is
+    # well inside the 2-run interval [0.025, 5.6] but outside the 50-run one [0.64, 1.43]:
+    # the check must judge each step by the runs that contributed (as its docstring says).
+    s = np.ones((50, 2))
+    s[:, 1] = np.nan
+    s[:2, 1] = [2.5, 3.5]
+    res = check(s, dof=1)
+    assert res.average[1] == pytest.approx(3.0)
+    lo, hi = res.bounds()
+    assert (lo[1], hi[1]) == pytest.approx(chi2_interval(1, 2))
+    assert (lo[0], hi[0]) == pytest.approx(chi2_interval(1, 50))
+    assert (res.lower, res.upper) == pytest.approx(chi2_interval(1, 50))
+    assert res.fraction_inside == 1.0

@@ -61,7 +61,11 @@ def chi2_interval(dof: int, runs: int = 1, probability: float = 0.95) -> tuple[f
 
 @dataclass(frozen=True)
 class ConsistencyCheck:
-    """Average statistic per time step against its chi-square interval."""
+    """Average statistic per time step against its chi-square interval.
+
+    ``lower``/``upper`` are the interval for all ``runs``; a step where only some runs have a
+    value (``count``) is judged against the wider interval of that many runs.
+    """
 
     average: np.ndarray  # (T,) Monte Carlo average of the statistic
     lower: float
@@ -69,14 +73,29 @@ class ConsistencyCheck:
     dof: int
     runs: int
     probability: float
+    count: np.ndarray | None = None  # (T,) runs that contributed at each step (None: all)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-step (lower, upper) for the number of runs that contributed (NaN where none did)."""
+        T = self.average.shape[0]
+        count = np.full(T, self.runs) if self.count is None else np.asarray(self.count)
+        lo = np.full(T, np.nan)
+        hi = np.full(T, np.nan)
+        ok = count > 0
+        a = (1.0 - self.probability) / 2.0
+        k = self.dof * count[ok]
+        lo[ok] = chi2.ppf(a, k) / count[ok]
+        hi[ok] = chi2.ppf(1.0 - a, k) / count[ok]
+        return lo, hi
 
     @property
     def fraction_inside(self) -> float:
         ok = np.isfinite(self.average)
         if not ok.any():
             return float("nan")
+        lo, hi = self.bounds()
         a = self.average[ok]
-        return float(np.mean((a >= self.lower) & (a <= self.upper)))
+        return float(np.mean((a >= lo[ok]) & (a <= hi[ok])))
 
     @property
     def mean(self) -> float:
@@ -98,4 +117,5 @@ def check(statistic: np.ndarray, dof: int, probability: float = 0.95) -> Consist
     average = np.full(s.shape[1], np.nan)
     np.divide(total, count, out=average, where=count > 0)
     lo, hi = chi2_interval(dof, runs, probability)
-    return ConsistencyCheck(average=average, lower=lo, upper=hi, dof=dof, runs=runs, probability=probability)
+    return ConsistencyCheck(average=average, lower=lo, upper=hi, dof=dof, runs=runs, probability=probability,
+                            count=count)
