@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from rovlab.control.lqg import LQGController, ThrusterMapping, lqg_tau, tau_to_wrench
+from rovlab.control.lqg import LQGController, lqg_tau, tau_to_wrench
+from rovlab.sim.autopilot import ThrusterMapping
 from rovlab.control.lqr import (
     bryson, design_lqr, design_lqr_from_config, dlqr, reference_gain_continuous, reference_gain_discrete,
 )

@@ -16,9 +16,10 @@ With the Kalman estimate x_hat = [z, psi, w, r, b_w, b_r] and references r = [z_
 
     lqg_tau(K (2 x 4), P (2 x 2), x_hat (6), ref (2), tau_out (2)) -> None
 
-:class:`ThrusterMapping` turns tau = [Z, N] into the 4-DOF wrench [0, 0, Z, N] (X = Y = 0,
-and K = M = 0 demanded by the allocation) and allocates it to thruster forces and PWM with
-:class:`rovlab.allocation.Allocator` (saturation-aware).
+:func:`tau_to_wrench` turns tau = [Z, N] into the 4-DOF wrench [0, 0, Z, N] (X = Y = 0; the
+allocation demands K = M = 0). The thruster mapping behind the law, which composes it with the
+saturation-aware allocation, is :class:`rovlab.sim.autopilot.ThrusterMapping` (control and
+allocation are sibling layers and do not import each other).
 """
 
 from __future__ import annotations
@@ -29,9 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from rovlab.allocation import AllocationResult, Allocator
 from rovlab.control.lqr import LQRDesign
-from rovlab.params.vehicle import Vehicle
 
 _TWO_PI = 2.0 * math.pi
 
@@ -73,18 +72,3 @@ def tau_to_wrench(tau: np.ndarray) -> np.ndarray:
     """The 4-DOF wrench [X, Y, Z, N] = [0, 0, Z, N] of a depth-and-heading demand [Z, N]."""
     Z, N = np.asarray(tau, dtype=float).ravel()
     return np.array([0.0, 0.0, Z, N])
-
-
-class ThrusterMapping:
-    """tau = [Z, N] -> thruster forces and PWM through the vehicle's allocation."""
-
-    def __init__(self, vehicle: Vehicle, allocator: Allocator | None = None) -> None:
-        self.vehicle = vehicle
-        self.allocator = allocator if allocator is not None else Allocator(vehicle)
-
-    def allocate(self, tau: np.ndarray) -> AllocationResult:
-        """Forces, PWM, achieved wrench and saturation report for the demand [Z, N]."""
-        return self.allocator.allocate(tau_to_wrench(tau))
-
-    def pwm_us(self, tau: np.ndarray) -> np.ndarray:
-        return self.allocate(tau).pwm_us
