@@ -320,3 +320,11 @@ def test_added_mass_in_millimetres_gets_a_note(capsys):
     code, _, err = run(capsys, "added-mass", "--length", 482, "--width", 333, "--height", 287,
                        "--area-front", 55915, "--area-side", 102378, "--area-top", 117375, "--json")
     assert code == 0 and "were they given in millimetres?" in err
+
+
+def test_static_table_without_table_flag_gets_a_hint(capsys):
+    from importlib import resources
+
+    src = resources.files("rovlab.models") / "data" / "t200" / "T200-Thrusters-16V.csv"
+    code, _, err = run(capsys, "identify", "thrust", str(src), "--no-plot")
+    assert code == 2 and "missing: time_s" in err and "for a static table add --table" in err

@@ -346,7 +346,17 @@ def _cmd_thrust(args: argparse.Namespace) -> int:
             max_force_n=args.max_force, pair=args.pair))
         source = f"static table ({fmt})"
     else:
-        log = thrust.read_thrust_log(args.file)
+        from rovlab.params.validate import ConfigError
+
+        try:
+            log = thrust.read_thrust_log(args.file)
+        except ConfigError as exc:
+            try:  # a static table (e.g. the maker's CSV) given without --table: say so
+                thrust.read_thrust_table(args.file)
+            except ConfigError:
+                raise exc from None
+            raise _user_error(f"{exc}\n  {args.file} has PWM and force columns but no time: for a static table "
+                              "add --table") from None
         fit = _run(args.file, lambda: thrust.fit_thrust_log(
             log["time_s"], log["pwm_us"], log["force_n"], pair=args.pair, window_s=args.window, cutoff_hz=args.cutoff,
             neutral_us=args.neutral, deadband_us=dead, pwm_range=rng, max_force_n=args.max_force))
