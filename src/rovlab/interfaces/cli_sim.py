@@ -5,13 +5,11 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -251,8 +251,8 @@ def summary_rows(metrics: Mapping[str, Any]) -> list[tuple[str, str]]:
         rows.append((f"overshoot {axis} [%]", _fmt(None if ov is None else 100 * ov, 3)))
     for d in metrics.get("dropouts", []):
         rows.append((f"heading drift during {d['sensor']} drop-out [deg]", _fmt(d["heading_drift_rad"] * _DEG)))
-        rows.append((f"max heading error during drop-out [deg]", _fmt(d["heading_error_max_rad"] * _DEG)))
-        rows.append((f"depth error RMS during / before drop-out [m]",
+        rows.append(("max heading error during drop-out [deg]", _fmt(d["heading_error_max_rad"] * _DEG)))
+        rows.append(("depth error RMS during / before drop-out [m]",
                      f"{_fmt(d['depth_error_rms_during'])} / {_fmt(d['depth_error_rms_before'])}"))
     nees = metrics.get("nees")
     if nees:

@@ -114,7 +114,7 @@ def pack(vehicle: Vehicle) -> np.ndarray:
 @njit(cache=True, fastmath=False)
 def nu_dot_packed(p: np.ndarray, nu: np.ndarray, tau: np.ndarray, b: np.ndarray) -> np.ndarray:
     """nu_dot = M^-1 (tau + b - C(nu) nu - D(nu) nu - g) on a packed parameter vector."""
-    u, v, w, r = nu[0], nu[1], nu[2], nu[3]
+    u, v, r = nu[0], nu[1], nu[3]
     m = p[P_M]
     a = m * (v + p[P_XG] * r)
     c = m * (u - p[P_YG] * r)

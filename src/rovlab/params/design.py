@@ -67,13 +67,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
-from rovlab.params.validate import Collector, ConfigError, Problem, TableReader, read_toml
+from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
 from rovlab.params.vehicle import SENSOR_CHANNELS, Sensor, Vehicle
 
 OBSERVER_STATES = ("z", "psi", "w", "r", "b_w", "b_r")
@@ -185,25 +184,20 @@ class DesignConfig:
 # Loading
 # --------------------------------------------------------------------------------------------
 
+_PACKAGED = PackagedFiles("rovlab.params", "configs", "filter configuration")
+
+
 def packaged_config_names() -> list[str]:
-    folder = resources.files("rovlab.params") / "configs"
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+    return _PACKAGED.names()
 
 
 def packaged_config_path(name: str) -> Path:
-    return Path(str(resources.files("rovlab.params") / "configs" / f"{name}.toml"))
+    return _PACKAGED.path(name)
 
 
 def resolve_config_path(name_or_path: str | Path) -> Path:
     """A packaged configuration name (``thesis``, ``default``) or a path to a TOML file."""
-    text = str(name_or_path)
-    path = Path(text)
-    if path.suffix == ".toml" or path.exists() or "/" in text:
-        return path
-    if text in packaged_config_names():
-        return packaged_config_path(text)
-    raise ConfigError([Problem(text, "", text, "a configuration file path or a packaged configuration: "
-                               + ", ".join(packaged_config_names()))], "filter configuration")
+    return _PACKAGED.resolve(name_or_path)
 
 
 def load_design_config(name_or_path: str | Path = "default") -> DesignConfig:

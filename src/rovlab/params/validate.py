@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from importlib import resources
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -55,6 +56,31 @@ _MISSING: Any = _Missing()
 def _show(value: Any) -> str:
     text = repr(value)
     return text if len(text) <= 80 else text[:77] + "..."
+
+
+class PackagedFiles:
+    """TOML files shipped in a package folder, addressed by name (``udrone``) or by path."""
+
+    def __init__(self, package: str, folder: str, what: str) -> None:
+        self.package, self.folder, self.what = package, folder, what
+
+    def names(self) -> list[str]:
+        base = resources.files(self.package) / self.folder
+        return sorted(p.name[:-5] for p in base.iterdir() if p.name.endswith(".toml"))
+
+    def path(self, name: str) -> Path:
+        return Path(str(resources.files(self.package) / self.folder / f"{name}.toml"))
+
+    def resolve(self, name_or_path: str | Path) -> Path:
+        """A path (anything ending in .toml, containing a slash or existing) or a packaged name."""
+        text = str(name_or_path)
+        path = Path(text)
+        if path.suffix == ".toml" or path.exists() or "/" in text:
+            return path
+        if text in self.names():
+            return self.path(text)
+        raise ConfigError([Problem(text, "", text, f"a {self.what} file path or a packaged {self.what} name: "
+                                   + ", ".join(self.names()))], self.what)
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:

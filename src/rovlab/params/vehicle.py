@@ -9,13 +9,12 @@ and docs/vehicle-file.md for the file format.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
-from rovlab.params.validate import Collector, ConfigError, Problem, TableReader, read_toml
+from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
 
 DOF4 = ("surge", "sway", "heave", "yaw")
 WRENCH6 = ("X", "Y", "Z", "K", "M", "N")
@@ -149,26 +148,20 @@ class Vehicle:
 # Loading
 # --------------------------------------------------------------------------------------------
 
+_PACKAGED = PackagedFiles("rovlab.params", "vehicles", "vehicle")
+
+
 def packaged_vehicle_names() -> list[str]:
-    folder = resources.files("rovlab.params") / "vehicles"
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+    return _PACKAGED.names()
 
 
 def packaged_vehicle_path(name: str) -> Path:
-    return Path(str(resources.files("rovlab.params") / "vehicles" / f"{name}.toml"))
+    return _PACKAGED.path(name)
 
 
 def resolve_vehicle_path(name_or_path: str | Path) -> Path:
     """A packaged vehicle name (``udrone``) or a path to a TOML file."""
-    text = str(name_or_path)
-    path = Path(text)
-    if path.suffix == ".toml" or path.exists() or "/" in text:
-        return path
-    if text in packaged_vehicle_names():
-        return packaged_vehicle_path(text)
-    raise ConfigError(
-        [Problem(text, "", text, "a vehicle file path or a packaged vehicle name: "
-                 + ", ".join(packaged_vehicle_names()))], "vehicle")
+    return _PACKAGED.resolve(name_or_path)
 
 
 def load_vehicle(name_or_path: str | Path = "udrone") -> Vehicle:

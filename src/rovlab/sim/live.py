@@ -15,16 +15,15 @@ management state while the channel set is unchanged).
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
 from rovlab.estimation.fusion import CH_MODE, MODE_AUTO, MODE_OFF, MODE_ON, new_channel_state
 from rovlab.io.messages import row_messages
 from rovlab.params.design import DesignConfig
-from rovlab.params.validate import ConfigError, Problem
 from rovlab.params.vehicle import Vehicle
-from rovlab.sim.runner import Prepared, _result, closed_loop, prepare
+from rovlab.sim.runner import Prepared, closed_loop, prepare
 from rovlab.sim.scenario import Scenario, load_scenario
 
 _MODES = {"auto": MODE_AUTO, "off": MODE_OFF, "on": MODE_ON}

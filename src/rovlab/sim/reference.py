@@ -28,7 +28,7 @@ def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) 
     fm = prep.filter_model
     alloc = prep.allocator
     bank = alloc.bank
-    h, n_sub, hp = a["h"], a["n_sub"], a["h_plant"]
+    n_sub, hp = a["n_sub"], a["h_plant"]
     n = a["n_ctrl"] if steps is None else steps
     observer = a["plant_kind"] == PLANT_OBSERVER
     xp = a["xp"].copy()

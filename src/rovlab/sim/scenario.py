@@ -47,13 +47,12 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
-from rovlab.params.validate import Collector, ConfigError, Problem, TableReader, read_toml
+from rovlab.params.validate import Collector, PackagedFiles, TableReader, read_toml
 
 _DEG = math.pi / 180.0
 DOF_NAMES = ("surge", "sway", "heave", "yaw")
@@ -105,20 +104,16 @@ class Scenario:
 
 # --------------------------------------------------------------------------------------------
 
+_PACKAGED = PackagedFiles("rovlab.sim", "scenarios", "scenario")
+
+
 def packaged_scenario_names() -> list[str]:
-    folder = resources.files("rovlab.sim") / "scenarios"
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+    return _PACKAGED.names()
 
 
 def resolve_scenario_path(name_or_path: str | Path) -> Path:
-    text = str(name_or_path)
-    path = Path(text)
-    if path.suffix == ".toml" or path.exists() or "/" in text:
-        return path
-    if text in packaged_scenario_names():
-        return Path(str(resources.files("rovlab.sim") / "scenarios" / f"{text}.toml"))
-    raise ConfigError([Problem(text, "", text, "a scenario file path or a packaged scenario name: "
-                               + ", ".join(packaged_scenario_names()))], "scenario")
+    """A packaged scenario name (``dropout``) or a path to a TOML file."""
+    return _PACKAGED.resolve(name_or_path)
 
 
 def load_scenario_data(name_or_path: str | Path) -> tuple[dict[str, Any], str]:
