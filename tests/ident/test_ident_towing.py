@@ -128,3 +128,18 @@ def test_missing_column_names_the_file():
     table = _table({"run": [1.0], "time_s": [0.0], "speed": [0.0], "force_n": [0.0]})
     with pytest.raises(ConfigError, match=r"runs.csv: header.*missing: speed_mps"):
         towing.identify_towing(table)
+
+
+def test_absent_term_that_comes_out_positive_is_pinned_at_zero(lab_table, heavy_vehicle):
+    # bluerov2_heavy has Y_v = 0 (von Benzon 2022): with this seed the linear term comes out at
+    # +0.06 +- 0.05, which the vehicle file would refuse (SNAME damping <= 0). It is fixed at 0,
+    # the quadratic term refitted, and the fit says so.
+    veh, rig = lab.towing_runs(heavy_vehicle, "sway", seed=2)
+    fit = towing.identify_towing(lab_table(veh), lab_table(rig), terms=("linear", "quadratic"), dof="sway")
+    assert fit.linear == 0.0 and set(fit.pinned) == {"linear"}
+    estimate, se = fit.pinned["linear"]
+    assert 0.0 < estimate <= 3.0 * se
+    assert fit.quadratic == pytest.approx(heavy_vehicle.damping_quadratic[1], rel=0.01)
+    assert fit.as_dict()["pinned_at_zero"] == {"linear": [estimate, se]}
+    edits = towing.damping_edits(fit, "sway")
+    assert all(value <= 0.0 for value in edits.values())

@@ -25,7 +25,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rovlab.ident.fitting import (DAMPING_TERMS, IdentificationError, LinearFit, check_terms, damping_regressors,
-                                  fit_damping, significant)
+                                  fit_damping, linear_lsq, significant)
 from rovlab.ident.steady import mean_with_stderr, plateau_window, rest_samples
 from rovlab.io.tables import DataTable, read_table, require_increasing, split_runs
 
@@ -94,6 +94,7 @@ class DampingFit:
     dof: str = ""
     unit: str = "N"  # "N m" for yaw
     speed_unit: str = "m/s"
+    pinned: Mapping[str, tuple[float, float]] = field(default_factory=dict)  # term -> (estimate, stderr) set to 0
 
     def coefficients(self) -> dict[str, float]:
         return {"linear": self.linear, "quadratic": self.quadratic, "cubic": self.cubic}
@@ -107,7 +108,7 @@ class DampingFit:
         return {"linear": self.linear, "quadratic": self.quadratic, "cubic": self.cubic,
                 "stderr": dict(self.stderr), "terms": list(self.terms), "rms": self.rms,
                 "runs": len(self.points), "rig_runs": len(self.rig_points), "rig": dict(self.rig),
-                "dof": self.dof}
+                "dof": self.dof, "pinned_at_zero": {k: list(v) for k, v in self.pinned.items()}}
 
 
 def _combine(total: LinearFit, rig: LinearFit | None, terms: tuple[str, ...]) -> tuple[dict, dict]:
@@ -118,6 +119,38 @@ def _combine(total: LinearFit, rig: LinearFit | None, terms: tuple[str, ...]) ->
         coef.setdefault(t, 0.0)
         se.setdefault(t, 0.0)
     return {k: float(v) for k, v in coef.items()}, {k: float(v) for k, v in se.items()}
+
+
+PIN_SIGMAS = 3.0  # a positive coefficient within this many standard errors of 0 is taken as 0
+
+
+def _pin_insignificant_positive(v: np.ndarray, damping: np.ndarray, terms: tuple[str, ...], coef: dict, se: dict,
+                                rig: LinearFit | None, *, what: str) -> dict[str, tuple[float, float]]:
+    """Set to 0 the terms whose estimate is positive but not significantly so, and refit the rest.
+
+    SNAME damping is <= 0 (a vehicle file refuses anything else). A term the vehicle does not
+    have (bluerov2_heavy's Y_v = 0, N_r = 0) comes out at +-noise, half the time positive; such
+    a term is fixed at 0 and the other terms refitted without it (``coef``, ``se`` updated in
+    place). A significantly positive term is kept: it points at the data (a flipped force sign),
+    and writing it is refused downstream.
+    """
+    pinned: dict[str, tuple[float, float]] = {}
+    while True:
+        free = [t for t in terms if t not in pinned]
+        bad = [t for t in free if 0.0 < coef[t] <= PIN_SIGMAS * se[t]]
+        if not bad:
+            return pinned
+        for t in bad:
+            pinned[t] = (coef[t], se[t])
+            coef[t] = 0.0
+        free = [t for t in terms if t not in pinned]
+        if not free:
+            return pinned
+        sub = linear_lsq(damping_regressors(v, free), damping, free, what=f"{what} fit")
+        rig_var = dict(zip(terms, rig.stderr**2)) if rig is not None else {}
+        for t, c, s_ in zip(free, sub.coef, sub.stderr):
+            coef[t] = float(c)
+            se[t] = float(np.sqrt(s_**2 + rig_var.get(t, 0.0)))
 
 
 def fit_steady_damping(points: Sequence[SteadyPoint], rig_points: Sequence[SteadyPoint] = (), *,
@@ -148,6 +181,7 @@ def fit_steady_damping(points: Sequence[SteadyPoint], rig_points: Sequence[Stead
     coef, se = _combine(total, rig, terms)
     rig_force = -(damping_regressors(v, terms) @ rig.coef) if rig is not None else np.zeros_like(v)
     damping = -(f - rig_force)  # vehicle-only damping force D(v)
+    pinned = _pin_insignificant_positive(v, damping, terms, coef, se, rig, what=what)
     fitted = damping_regressors(v, terms) @ np.array([coef[t] for t in terms])
     res = damping - fitted
     return DampingFit(
@@ -155,7 +189,7 @@ def fit_steady_damping(points: Sequence[SteadyPoint], rig_points: Sequence[Stead
         points=tuple(points), rig_points=tuple(rig_points),
         rig=dict(zip(terms, map(float, rig.coef))) if rig is not None else {},
         speed=v, damping=damping, residual=res, rms=float(np.sqrt(np.mean(res**2))), dof=dof, unit=unit,
-        speed_unit=speed_unit)
+        speed_unit=speed_unit, pinned=pinned)
 
 
 def towing_runs(table: DataTable) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:

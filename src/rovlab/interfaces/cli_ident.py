@@ -393,6 +393,9 @@ def _damping_text(fit, file: str, label: str) -> str:
     for t in fit.terms:
         lines.append(f"  {t:9s} = {_pm(getattr(fit, t), fit.stderr[t])} {units[t]}")
     lines.append(f"  RMS residual {fit.rms:.4g} {fit.unit}")
+    for t, (c, se) in fit.pinned.items():
+        lines.append(f"  note: {t} came out {c:+.3g} ± {se:.2g}, not significantly positive: fixed at 0 (SNAME "
+                     "damping is <= 0) and the other terms refitted")
     if fit.dof == "yaw":
         lines.append("  run   rate       moment      window      (rad/s, N m)")
     else:
