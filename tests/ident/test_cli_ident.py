@@ -328,3 +328,12 @@ def test_static_table_without_table_flag_gets_a_hint(capsys):
     src = resources.files("rovlab.models") / "data" / "t200" / "T200-Thrusters-16V.csv"
     code, _, err = run(capsys, "identify", "thrust", str(src), "--no-plot")
     assert code == 2 and "missing: time_s" in err and "for a static table add --table" in err
+
+
+def test_positive_added_mass_points_at_the_mass_option(capsys, tmp_path):
+    # a yaw relay identified with the vehicle's mass instead of I_zz: m - 1/k > 0
+    log = tmp_path / "yaw-relay.csv"
+    run(capsys, "lab", "step", "--dof", "yaw", "--force", 0.3, "--amplitude", 1.0, "--seed", 4, "--linear",
+        "--out", log)
+    code, _, err = run(capsys, "identify", "step", log, "--mass", 7.31, "--no-plot")
+    assert code == 0 and "added mass comes out positive" in err and "inertia I_zz" in err

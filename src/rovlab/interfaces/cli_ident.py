@@ -454,6 +454,11 @@ def _cmd_step(args: argparse.Namespace) -> int:
         raise _user_error(f"{args.file}: --dof {args.dof} needs the columns {need}, but the file has {have}; "
                           f"use --dof {'yaw' if yaw else 'surge, sway or heave'}")
     fit = _run(args.file, lambda: step.fit_step_response(t, f, x, mass=args.mass, bias=args.fit_bias))
+    if fit.added_mass > 0:
+        print(f"rovlab: note: the added mass comes out positive: --mass {args.mass:g} is more than the total "
+              f"{'inertia' if yaw else 'mass'} 1/k = {1 / fit.gain:.4g} the test shows; --mass is the rigid-body "
+              f"{'inertia I_zz [kg m^2]' if yaw else 'mass [kg]'} (a vehicle file refuses a positive added mass)",
+              file=sys.stderr)
     png = _plot(args, "step", lambda p: plots.plot_step(
         fit, p, title=f"Relay/step response ({args.dof}): {Path(args.file).name}",
         position_unit="rad" if yaw else "m", force_unit="N m" if yaw else "N",
