@@ -140,3 +140,13 @@ def test_filter_reports_faulty_samples(capsys, tmp_path):
     est = read_log(tmp_path / "est.csv")
     assert est.text["status_z_pressure"][20] == "lost-nonfinite"
     assert np.all(np.isfinite(est["z"]))
+
+
+def test_filter_keeps_epoch_time_stamps(capsys, tmp_path):
+    cols = _log(n=30)
+    cols["time_s"] = 1.7e9 + cols["time_s"]  # a ROS-style log stamped with Unix time
+    write_csv(tmp_path / "epoch.csv", cols)
+    code, _, err = run(capsys, "filter", str(tmp_path / "epoch.csv"), "--out", str(tmp_path / "est.csv"))
+    assert code == 0, err
+    est = read_log(tmp_path / "est.csv")  # strictly increasing times, or this read would fail
+    np.testing.assert_array_equal(est.time, cols["time_s"])

@@ -81,3 +81,14 @@ def test_writer_checks_columns_and_writes_to_a_stream():
     buf = io.StringIO()
     write_csv(buf, {"time_s": [0.1 + 0.2], "n": np.array([3], dtype=np.int8), "s": ["a\"b"]})
     assert buf.getvalue() == 'time_s,n,s\n0.30000000000000004,3,"a""b"\n'
+
+
+def test_exact_columns_keep_epoch_time_stamps():
+    # '%.10g' turned 1700000000.1 into 1700000000: every row of a log stamped with epoch time
+    # got the same time. Columns named in ``exact`` are written in round-trip form.
+    buf = io.StringIO()
+    write_csv(buf, {"time_s": [1700000000.0, 1700000000.1], "z": [1.0 / 3.0, 2.0]}, float_format="%.10g",
+              exact=("time_s",))
+    log = parse_log(buf.getvalue())
+    np.testing.assert_array_equal(log.time, [1700000000.0, 1700000000.1])
+    assert buf.getvalue().splitlines()[1] == "1700000000.0,0.3333333333"

@@ -152,7 +152,7 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     comments = [f"rovlab filter {args.log}: vehicle {vehicle.name}, configuration {config.name}, "
                 f"h = {model.h:g} s", "units: SI (m, rad, m/s, rad/s, N, N m); var_* are the variances"]
     try:
-        write_csv(args.out, out, comments=comments, float_format="%.10g")
+        write_csv(args.out, out, comments=comments, float_format="%.10g", exact=("time_s",))
     except OSError as exc:
         raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
 

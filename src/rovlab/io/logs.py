@@ -184,11 +184,13 @@ def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
 
 
 def write_csv(target: str | Path | IO[str], columns: Mapping[str, Sequence | np.ndarray], *,
-              float_format: str | None = None, comments: Iterable[str] = ()) -> None:
+              float_format: str | None = None, comments: Iterable[str] = (),
+              exact: Iterable[str] = ()) -> None:
     """Write equally long columns (numbers or strings) as CSV; ``-`` means standard output.
 
     Numbers are written exactly (shortest round-trip form) unless ``float_format`` (e.g.
-    ``"%.6g"``) is given; NaN is written as an empty cell ("no value"), so what this writes
+    ``"%.6g"``) is given; the ``exact`` columns (e.g. ``("time_s",)``) are always written exactly, so
+    that ``%.10g`` does not turn epoch time stamps (1.7e9 s) into whole seconds. NaN is written as an empty cell ("no value"), so what this writes
     :func:`read_log` reads back unchanged. A file is written atomically (temporary file, then
     rename) so a crash never leaves half a log.
     """
@@ -197,6 +199,7 @@ def write_csv(target: str | Path | IO[str], columns: Mapping[str, Sequence | np.
         raise ValueError("no columns to write")
     cols = []
     length = None
+    exact = set(exact)
     for name in names:
         col = columns[name]
         arr = np.asarray(col)
@@ -209,7 +212,7 @@ def write_csv(target: str | Path | IO[str], columns: Mapping[str, Sequence | np.
         if arr.dtype.kind in "iub":
             cols.append([str(v) for v in arr.tolist()])
         elif arr.dtype.kind == "f":
-            fmt = repr if float_format is None else (lambda v: float_format % v)
+            fmt = repr if float_format is None or name in exact else (lambda v: float_format % v)
             cols.append(["" if v != v else fmt(v) for v in arr.astype(float).tolist()])
         else:
             cols.append([_quote(str(v)) for v in arr.tolist()])
