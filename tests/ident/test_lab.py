@@ -120,3 +120,13 @@ def test_thrusters_with_different_curves_on_one_rig_are_flagged(udrone_vehicle):
     mixed = lab.thrust_rig(udrone_vehicle, ["T1", "T3"], seed=1, step_s=2.0)  # SPEC 2: T3 has its own curve
     assert not any("do not share one thrust curve" in n for n in same.notes)
     assert any("do not share one thrust curve" in n for n in mixed.notes)
+
+
+def test_long_resting_log_keeps_increasing_times(tmp_path, udrone_vehicle):
+    # time_s was written with 6 significant digits: past 100 000 s (1e6 samples at 10 Hz) rows
+    # got equal times and the file could not be read back
+    d = lab.resting_log(udrone_vehicle, seed=1, samples=2, rate_hz=1e-5)  # t = 0, 100 000 s ...
+    d = lab.LabData(d.experiment, {k: v + (123456.7 if k == "time_s" else 0.0) for k, v in d.columns.items()},
+                    d.truth, d.settings, d.seed, d.vehicle, d.formats, d.notes)
+    lab.write_lab_data(tmp_path / "rest.csv", d)
+    np.testing.assert_allclose(read_table(tmp_path / "rest.csv")["time_s"], [123456.7, 223456.7], rtol=1e-12)

@@ -495,4 +495,4 @@ def resting_log(vehicle: Vehicle, *, seed: int | None = None, samples: int = 679
             cols[name] = REST_LEVEL.get(ch, 0.0) + drift + sd * rng.standard_normal(samples)
             truth[name] = float(var)
     return LabData("noise", cols, truth, {"samples": samples, "rate_hz": rate, "drift_sigmas": drift_sigmas},
-                   seed, vehicle.name, {"time_s": ".6g"})
+                   seed, vehicle.name)
