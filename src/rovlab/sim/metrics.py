@@ -12,7 +12,8 @@ import math
 from typing import Any, Sequence
 
 import numpy as np
-from scipy.stats import chi2
+
+from rovlab.estimation import consistency as cons
 
 
 def wrap(a: np.ndarray | float) -> np.ndarray:
@@ -61,56 +62,32 @@ def step_response(t: np.ndarray, y: np.ndarray, t_step: float, y0: float, y1: fl
     return out
 
 
-def nees(err: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """e_k^T P_k^-1 e_k per row (P: (K, n, n)); NaN where P is singular (e.g. P0 = 0)."""
-    err = np.asarray(err, dtype=float)
-    P = np.asarray(P, dtype=float)
-    out = np.full(err.shape[0], np.nan)
-    # Cholesky of every covariance at once; rows that are not positive definite stay NaN
-    diag = np.einsum("kii->ki", P)
-    ok = np.all(diag > 0, axis=1) & np.all(np.isfinite(P), axis=(1, 2)) & np.all(np.isfinite(err), axis=1)
-    idx = np.flatnonzero(ok)
-    if idx.size:
-        try:
-            L = np.linalg.cholesky(P[idx])
-            z = np.linalg.solve(L, err[idx][..., None])[..., 0]
-            out[idx] = np.sum(z * z, axis=1)
-        except np.linalg.LinAlgError:
-            for k in idx:
-                try:
-                    out[k] = err[k] @ np.linalg.solve(P[k], err[k])
-                except np.linalg.LinAlgError:
-                    pass
-    return out
-
-
-@functools.lru_cache(maxsize=256)
-def chi2_interval(dof: float, runs: int = 1, probability: float = 0.95) -> tuple[float, float]:
-    """Two-sided bounds of the average of `runs` independent chi-square(dof) variables."""
-    a = (1 - probability) / 2
-    return (float(chi2.ppf(a, dof * runs) / runs), float(chi2.ppf(1 - a, dof * runs) / runs))
+# chi-square intervals are asked for the same (dof, runs) over and over in Monte Carlo
+_interval = functools.lru_cache(maxsize=256)(cons.chi2_interval)
 
 
 def consistency(values: np.ndarray, dof: int, *, probability: float = 0.95) -> dict[str, Any]:
     """Consistency of a NEES/NIS series from one run (values: (K,)) or many (values: (N, K)).
 
-    Returns the average, the share of time steps whose run-average lies inside the chi-square
-    bounds, and the bounds themselves. A consistent filter keeps about `probability` inside.
+    Returns the overall average and its chi-square interval, and the share of time steps whose
+    run-average lies inside the per-step interval (rovlab.estimation.consistency.check; a
+    consistent filter keeps about `probability` inside).
     """
     v = np.atleast_2d(np.asarray(values, dtype=float))
     runs = v.shape[0]
     ok = np.isfinite(v)
-    count = ok.sum(axis=0)
-    per_step = np.where(count > 0, np.where(ok, v, 0.0).sum(axis=0) / np.maximum(count, 1), np.nan)
-    lo, hi = chi2_interval(dof, runs, probability)
-    finite = np.isfinite(per_step)
-    inside = float(np.mean((per_step[finite] >= lo) & (per_step[finite] <= hi))) if finite.any() else math.nan
-    total = float(np.where(ok, v, 0.0).sum())
     n = int(ok.sum())
-    avg_lo, avg_hi = chi2_interval(dof, max(n, 1), probability)
+    mean = float(np.where(ok, v, 0.0).sum() / max(n, 1))
+    lo, hi = _interval(dof, runs, probability)
+    if runs > 1:
+        share = cons.check(np.where(ok, v, np.nan), dof, probability).fraction_inside
+    else:
+        row = v[0][ok[0]]
+        share = float(np.mean((row >= lo) & (row <= hi))) if row.size else math.nan
+    avg_lo, avg_hi = _interval(dof, max(n, 1), probability)
     return {
-        "dof": dof, "runs": runs, "mean": float(total / max(n, 1)),
-        "bounds_per_step": [lo, hi], "share_inside": inside,
+        "dof": dof, "runs": runs, "mean": mean,
+        "bounds_per_step": [lo, hi], "share_inside": share,
         "mean_bounds": [avg_lo, avg_hi],
-        "mean_inside": bool(avg_lo <= total / max(n, 1) <= avg_hi),
+        "mean_inside": bool(avg_lo <= mean <= avg_hi),
     }
