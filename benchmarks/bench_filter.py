@@ -13,12 +13,11 @@ Run: ``.venv/bin/python benchmarks/bench_filter.py``. Times are best-of-N wall c
 
 from __future__ import annotations
 
-import os
+import sys
+from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy is imported
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).parent))
+import _timing  # noqa: E402  (pins the BLAS/numba threads to 1 before numpy is imported)
 
 import time  # noqa: E402
 from dataclasses import replace  # noqa: E402
@@ -79,18 +78,6 @@ def filterpy_run(filt, t, u, y):
     return X
 
 
-def per_call(fn, n: int = 20_000, repeat: int = 5) -> float:
-    """Best-of-`repeat` mean seconds per call of fn()."""
-    fn()
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        for _ in range(n):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / n)
-    return best
-
-
 def single_step_times(filt, u, y) -> tuple[float, float]:
     """One predict+update with all three sensors present: filterpy vs rovlab's step()."""
     from filterpy.kalman import KalmanFilter
@@ -113,7 +100,7 @@ def single_step_times(filt, u, y) -> tuple[float, float]:
     def ours():
         step(belief, 0.1, u, y)
 
-    return per_call(fp), per_call(ours)
+    return _timing.per_call(fp), _timing.per_call(ours)
 
 
 def best_of(fn, repeat: int) -> float:
