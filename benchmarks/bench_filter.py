@@ -103,15 +103,6 @@ def single_step_times(filt, u, y) -> tuple[float, float]:
     return _timing.per_call(fp), _timing.per_call(ours)
 
 
-def best_of(fn, repeat: int) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
 def main() -> None:
     from rovlab.estimation.kalman import DepthHeadingFilter
 
@@ -137,9 +128,9 @@ def main() -> None:
     setup = time.perf_counter() - t0
 
     t_fp1, t_on1 = single_step_times(filt, u[0], y[0])
-    t_fp = best_of(lambda: filterpy_run(filt, t, u, y), 2)
-    t_off = best_of(rovlab_offline, 7)
-    t_on = best_of(rovlab_online, 3)
+    t_fp = _timing.once(lambda: filterpy_run(filt, t, u, y), repeat=2)
+    t_off = _timing.once(rovlab_offline, repeat=7)
+    t_on = _timing.once(rovlab_online, repeat=3)
 
     res = rovlab_offline()
     rejected = int(np.sum(res.event == 2))

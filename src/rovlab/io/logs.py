@@ -25,6 +25,7 @@ from typing import IO, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from rovlab.io.tables import scan_csv
 from rovlab.params.validate import ConfigError, Problem
 
 _MAX_PROBLEMS = 20
@@ -86,24 +87,9 @@ def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
     read as numbers when every cell is one, and kept as text otherwise (``Log.text``).
     """
     text = text.removeprefix("\ufeff")
-    comments: list[str] = []
-    header: list[str] | None = None
-    header_line = 0
-    rows: list[list[str]] = []
-    row_lines: list[int] = []
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if not line:
-            continue
-        if line.startswith("#"):
-            comments.append(line[1:].strip())
-            continue
-        cells = next(csv.reader([line])) if '"' in line else line.split(",")
-        if header is None:
-            header, header_line = [c.strip() for c in cells], number
-            continue
-        rows.append(cells)
-        row_lines.append(number)
+    comments, header, header_line, rows, row_lines = scan_csv(
+        text, split=lambda line: next(csv.reader([line])) if '"' in line else line.split(","))
+    header = [c.strip() for c in header] if header is not None else None
 
     need = [time_column] + [c for c in required if c != time_column]
     if header is None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
+from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -86,6 +86,34 @@ def _where(table: DataTable, row: int | None, column: str | None) -> str:
     return ", ".join(parts)
 
 
+def scan_csv(text: str, *, split: Callable[[str], list[str]]
+             ) -> tuple[list[str], list[str] | None, int, list[list[str]], list[int]]:
+    """Split CSV text into (comments, header cells, header line, data rows, their line numbers).
+
+    Blank lines are skipped and lines starting with '#' are comments; ``split`` turns one line
+    into cells (the readers differ in quoting and stripping). Line numbers start at 1.
+    """
+    comments: list[str] = []
+    header: list[str] | None = None
+    header_line = 0
+    rows: list[list[str]] = []
+    row_lines: list[int] = []
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            comments.append(line[1:].strip())
+            continue
+        cells = split(line)
+        if header is None:
+            header, header_line = cells, number
+            continue
+        rows.append(cells)
+        row_lines.append(number)
+    return comments, header, header_line, rows, row_lines
+
+
 def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "data file") -> DataTable:
     """Read a numeric CSV file; raise :class:`ConfigError` naming file, line and column on any problem.
 
@@ -104,24 +132,9 @@ def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "d
         raise ConfigError([Problem(file, "", "undecodable bytes", f"UTF-8 text ({exc.reason} at byte "
                                    f"{exc.start})")], what) from None
 
-    comments: list[str] = []
-    header: list[str] | None = None
-    header_line = 0
-    rows: list[list[str]] = []
-    row_lines: list[int] = []
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if not line:
-            continue
-        if line.startswith("#"):
-            comments.append(line[1:].strip())
-            continue
-        cells = [c.strip() for c in line.split(",")]
-        if header is None:
-            header, header_line = _trim(cells), number
-            continue
-        rows.append(cells)
-        row_lines.append(number)
+    comments, header, header_line, rows, row_lines = scan_csv(text, split=lambda line: [
+        c.strip() for c in line.split(",")])
+    header = _trim(header) if header is not None else None
 
     if header is None:
         raise ConfigError([Problem(file, "", "an empty file", "a header line of column names, e.g. "
