@@ -17,7 +17,7 @@ import numpy as np
 from scipy.linalg import null_space, qr
 from scipy.stats import chi2
 
-from rovlab.estimation.discretise import discretise
+from rovlab.models.discretise import discretise
 from rovlab.estimation.fusion import (
     CFG_ANGLE, CFG_GATE, CFG_LOSE_AFTER, CFG_OFFSET, CFG_R, CFG_RAMP_FACTOR, CFG_RAMP_TIME,
     CFG_REACQUIRE, CFG_STATE, CFG_TIMEOUT, N_CFG,

@@ -15,6 +15,8 @@ File format (every table is closed: unknown keys are errors; ``source`` is requi
     name = "thesis"
     source = "where the numbers came from"
     sample_time = 0.1                      # h [s], filter and controller step
+    estimator = "kf"                       # optional: the estimator component (default "kf")
+    controller = "lqg"                     # optional: the controller component (default "lqg")
 
     [model]                                # optional; absent keys come from the vehicle file
     source = "..."
@@ -151,6 +153,8 @@ class DesignConfig:
     reference_gain: str  # "discrete" | "continuous"
     sources: Mapping[str, str] = field(default_factory=dict)
     file: str = ""
+    estimator: str = "kf"  # the estimator component (rovlab.sim.components.ESTIMATORS)
+    controller: str = "lqg"  # the controller component (rovlab.sim.components.CONTROLLERS)
 
     @property
     def W(self) -> np.ndarray:
@@ -214,6 +218,8 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     description = top.string("description", "")
     sources["config"] = top.string("source")
     h = top.number("sample_time", positive=True, what="filter and controller step in s")
+    estimator = top.string("estimator", "kf")  # checked against the registry when the loop is built
+    controller = top.string("controller", "lqg")
 
     overrides: dict[str, float] = {}
     if top.has("model"):
@@ -287,7 +293,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         name=name, description=description, sample_time=h, model_overrides=overrides, psd=psd,
         bias_time_per_mass=per_mass, bias_time_constant=constants, measurements=tuple(measurements),
         initial_state=x0, initial_std=std, lqr_Q=Q, lqr_R=R, lqr_bryson=bryson,
-        reference_gain=reference, sources=sources, file=file,
+        reference_gain=reference, sources=sources, file=file, estimator=estimator, controller=controller,
     )
 
 

@@ -8,6 +8,8 @@ initial state, the reference schedule, drop-out windows, the true disturbances a
     source = "Sandøy 2016, fig. 5.4; SPEC section 7, case 3"
     vehicle = "udrone"              # packaged name, or a path relative to this file
     design = "thesis"               # filter/controller configuration (name or path)
+    estimator = "kf"                # optional: override the configuration's estimator / controller
+    controller = "lqg"
     plant = "process"               # "process": nonlinear 4-DOF model with thrusters, noise and
                                     # biases; "observer": the linear design model ("perfect model")
     duration_s = 60.0
@@ -95,6 +97,8 @@ class Scenario:
     pwm_resolution_us: float
     truth_parameters: Mapping[str, float]
     file: str = ""
+    estimator: str | None = None  # overrides the design configuration's choice
+    controller: str | None = None
 
     def reference_at(self, t: float) -> tuple[float, float]:
         k = int(np.searchsorted(self.reference_times, t, side="right")) - 1
@@ -195,6 +199,8 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
     vehicle = _resolve_relative(top.string("vehicle", "udrone"), file)
     design = _resolve_relative(top.string("design", "default"), file)
     plant = top.string("plant", "process", choices=PLANTS)
+    estimator = top.string("estimator", "") or None  # checked against the registry at prepare
+    controller = top.string("controller", "") or None
     duration = top.number("duration_s", positive=True, hi=1e6)
     step = top.number("plant_step_s", 0.01, positive=True, hi=1.0)
 
@@ -258,6 +264,7 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
         reference_times=np.array(times), reference_z=np.array(zs), reference_psi=np.array(psis),
         dropouts=tuple(dropouts), process_noise_psd=psd, bias_std=bias_std, bias_time_constant_s=bias_T,
         buoyancy_offset=buoy, pwm_resolution_us=pwm_res, truth_parameters=truth_params, file=file,
+        estimator=estimator, controller=controller,
     )
 
 
