@@ -45,12 +45,12 @@ class KalmanFilter(NamedTuple):
     STATE = ("x", "P", "ch")
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _correct(est, t, y, present, rep):
     correct_arrays(est.x, est.P, est.ch, est.H, est.cfg, est.wrap, t, y, present, rep, est.work)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _predict(est, t, tau):
     for i in range(est.inputs.shape[0]):
         est.u[i] = tau[est.inputs[i]]

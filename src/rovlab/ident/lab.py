@@ -34,6 +34,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from rovlab.core.angles import wrap as wrap_angle
 from rovlab.params.vehicle import DOF4, Vehicle
 
 # Fallbacks when a vehicle file lacks a sensor: uDrone's Qualisys (thesis table 4.8).
@@ -338,11 +339,6 @@ def _position_variance(vehicle: Vehicle, dof: str) -> tuple[float, float, str]:
                     f"observed by motion capture {s.name!r}: {ch} variance {float(s.variance[ch]):.4g} at {s.rate_hz:g} Hz")
     return QUALISYS_VARIANCE[ch], 10.0, (f"{vehicle.name} has no motion-capture sensor with {ch}: uDrone's Qualisys "
                                          "variance at 10 Hz (thesis table 4.8) is used")
-
-
-def wrap_angle(x: np.ndarray) -> np.ndarray:
-    """Angles wrapped to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(x, dtype=float), 2 * np.pi)
 
 
 # --------------------------------------------------------------------------------------------

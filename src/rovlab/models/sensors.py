@@ -25,13 +25,14 @@ class SensorBank(NamedTuple):
     angle: np.ndarray  # bool (m): wrap to (-pi, pi]
 
 
-@njit(cache=True)
-def sample_sensors(bank, truth, k, normals, dropout, y, present):
-    """Samples of control step k into y (NaN when none) and present."""
+@njit(cache=True, inline="always")
+def sample_sensors(bank, truth, k, normals, dropout, row, y, present):
+    """Samples of control step k into y (NaN when none) and present; normals and dropout
+    (rows x channels) are read at ``row``."""
     for j in range(y.shape[0]):
         p = bank.period[j]
-        if p > 0 and k % p == 0 and not dropout[j]:
-            v = truth[bank.quantity[j]] + bank.offset[j] + bank.std[j] * normals[j]
+        if p > 0 and k % p == 0 and not dropout[row, j]:
+            v = truth[bank.quantity[j]] + bank.offset[j] + bank.std[j] * normals[row, j]
             if bank.angle[j]:
                 v = wrap_angle(v)
             y[j] = v

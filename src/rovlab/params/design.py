@@ -74,6 +74,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from rovlab.core.weights import bryson_diagonal
 from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
 from rovlab.params.vehicle import SENSOR_CHANNELS, Sensor, Vehicle
 
@@ -384,10 +385,10 @@ def _lqr_weights(t: TableReader) -> tuple[np.ndarray, np.ndarray, dict[str, np.n
         if sub.has(key):
             uw[i] = sub.number(key, positive=True)
     sub.finish()
-    # Bryson's rule (Bryson & Ho 1975): weight_i / max_i^2. Kept as plain arithmetic here so the
-    # params layer does not import rovlab.control; rovlab.control.lqr.bryson is the same rule.
-    Q = sw / smax**2
-    R = uw / umax**2
+    # Bryson's rule (Bryson & Ho 1975): weight_i / max_i^2 (NaN where the file's value was refused)
+    with np.errstate(invalid="ignore"):
+        Q = bryson_diagonal(np.where(smax > 0, smax, np.nan), sw)
+        R = bryson_diagonal(np.where(umax > 0, umax, np.nan), uw)
     return Q, R, {"state_max": smax, "input_max": umax, "state_weight": sw, "input_weight": uw}
 
 

@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from rovlab.allocation.solvers import Allocator, allocate_kernel, matvec
+from rovlab.allocation.solvers import Allocator, allocate_kernel
 from rovlab.models.thrusters import ThrusterBank, bank_force, bank_pwm
 
 _DOF6 = (0, 1, 2, 5)  # X, Y, Z, N in the 6-DOF wrench [X, Y, Z, K, M, N]
@@ -42,7 +42,7 @@ def make_actuators(allocator: Allocator, bank: ThrusterBank, B_true: np.ndarray,
                      bank.grid_force, float(pwm_res), np.zeros(6))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def actuate(act, tau, tau_cmd, tau_real, pwm):
     """Allocate the demanded wrench tau (4); fill the achieved wrench tau_cmd (4), the real one
     tau_real (4) and the PWM commands pwm (n thrusters)."""
@@ -61,13 +61,12 @@ def actuate(act, tau, tau_cmd, tau_real, pwm):
     for i in range(nt):
         pwm[i] = cmd[i]
     f_real = bank_force(act.rows, act.grid_pwm, act.grid_force, cmd)
-    achieved = matvec(act.B, f)
-    real = matvec(act.B_true, f_real)
-    tau_cmd[0] = achieved[0]
-    tau_cmd[1] = achieved[1]
-    tau_cmd[2] = achieved[2]
-    tau_cmd[3] = achieved[5]
-    tau_real[0] = real[0]
-    tau_real[1] = real[1]
-    tau_real[2] = real[2]
-    tau_real[3] = real[5]
+    for a in range(4):
+        r = _DOF6[a]
+        acc = 0.0
+        acc_real = 0.0
+        for i in range(nt):
+            acc += act.B[r, i] * f[i]
+            acc_real += act.B_true[r, i] * f_real[i]
+        tau_cmd[a] = acc
+        tau_real[a] = acc_real

@@ -32,13 +32,14 @@ from numba import njit
 
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
-    N_TRUTH, controller_actuated, controller_step, estimator_correct, estimator_predict, plant_advance, plant_truth,
+    N_TRUTH, TRUTH_INDEX, controller_actuated, controller_step, estimator_correct, estimator_predict, plant_advance, plant_truth,
 )
 from rovlab.estimation.fusion import CH_STATUS, EVENT_USED, N_REP, REP_EVENT, REP_INNOV, REP_S
 from rovlab.models.sensors import sample_sensors
 from rovlab.sim.actuators import actuate
 
 N_WRENCH_LOG = 8  # allocated X, Y, Z, N, then demanded X, Y, Z, N
+_PSI = TRUTH_INDEX["psi"]
 
 
 class Drive(NamedTuple):
@@ -118,61 +119,70 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
     n = est.x.shape[0]
     m = sensors.quantity.shape[0]
     nt = act.rows.shape[0]
+    n_nees = nees_idx.shape[0]
     rep = np.empty((m, N_REP))
     y = np.empty(m)
     present = np.empty(m, dtype=np.bool_)
     truth = np.empty(N_TRUTH)
     nav = np.zeros(N_TRUTH)
-    err = np.empty(nees_idx.shape[0])
-    chol = np.empty((nees_idx.shape[0], nees_idx.shape[0]))
+    err = np.empty(n_nees)
+    chol = np.empty((n_nees, n_nees))
     tau = np.zeros(4)
     tau_cmd = np.zeros(4)
     tau_real = np.zeros(4)
     pwm = np.empty(nt)
+    # bound once: array fields read in the loop body
+    x = est.x
+    P = est.P
+    ch = est.ch
+    cstate = ctrl.state
+    refs = drive.refs
+    normals = drive.sensor_normals
+    dropout = drive.dropout
+    log_truth, log_y, log_status, log_x, log_P = logs.truth, logs.y, logs.status, logs.x, logs.P
+    log_wrench, log_pwm, log_cons, log_ctrl = logs.wrench, logs.pwm, logs.cons, logs.ctrl
     for k in range(k0, k1):
         row = k - k0
         t = k * h
         # -- truth and sensors at t_k ---------------------------------------------------------
         plant_truth(plant, truth)
         for i in range(N_TRUTH):
-            logs.truth[row, i] = truth[i]
-        sample_sensors(sensors, truth, k, drive.sensor_normals[row], drive.dropout[row], y, present)
+            log_truth[row, i] = truth[i]
+        sample_sensors(sensors, truth, k, normals, dropout, row, y, present)
         for j in range(m):
-            logs.y[row, j] = y[j]
+            log_y[row, j] = y[j]
         # -- estimator: correct -------------------------------------------------------------
         estimator_correct(est, t, y, present, rep)
-        x = est.x
-        P = est.P
         for i in range(n):
-            logs.x[row, i] = x[i]
+            log_x[row, i] = x[i]
             for jj in range(n):
-                logs.P[row, i, jj] = P[i, jj]
+                log_P[row, i, jj] = P[i, jj]
         nis = 0.0
         used = 0
         for j in range(m):
-            logs.status[row, j] = est.ch[j, CH_STATUS]
+            log_status[row, j] = ch[j, CH_STATUS]
             if rep[j, REP_EVENT] == EVENT_USED:
                 nis += rep[j, REP_INNOV] ** 2 / rep[j, REP_S]
                 used += 1
-        logs.cons[row, 0] = nis
-        logs.cons[row, 1] = used
-        for a in range(nees_idx.shape[0]):
+        log_cons[row, 0] = nis
+        log_cons[row, 1] = used
+        for a in range(n_nees):
             i = nees_idx[a]
             e = x[i] - truth[nav_of[i]]
-            err[a] = wrap_angle(e) if nav_of[i] == 3 else e
-        logs.cons[row, 2] = _nees(err, P, nees_idx, chol)
+            err[a] = wrap_angle(e) if nav_of[i] == _PSI else e
+        log_cons[row, 2] = _nees(err, P, nees_idx, chol)
         # -- controller, allocation and thrusters ---------------------------------------------
         for i in range(n):
             nav[nav_of[i]] = x[i]
-        controller_step(ctrl, t, nav, drive.refs[row], tau)
+        controller_step(ctrl, t, nav, refs[row], tau)
         actuate(act, tau, tau_cmd, tau_real, pwm)
         for i in range(nt):
-            logs.pwm[row, i] = pwm[i]
+            log_pwm[row, i] = pwm[i]
         for i in range(4):
-            logs.wrench[row, i] = tau_cmd[i]
-            logs.wrench[row, 4 + i] = tau[i]
-        for i in range(ctrl.state.shape[0]):
-            logs.ctrl[row, i] = ctrl.state[i]
+            log_wrench[row, i] = tau_cmd[i]
+            log_wrench[row, 4 + i] = tau[i]
+        for i in range(cstate.shape[0]):
+            log_ctrl[row, i] = cstate[i]
         # -- estimator: predict; controller: what was achieved; plant to t_k+1 -----------------
         estimator_predict(est, t, tau_cmd)
         controller_actuated(ctrl, t, tau, tau_cmd)

@@ -62,7 +62,7 @@ class ObserverPlant(NamedTuple):
     DRAWS = 6
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _process_truth(plant, truth):
     x = plant.x
     for i in range(8):
@@ -89,7 +89,7 @@ def process_advance(p, x, tau_b, h, noise_std, normals, k, f):
         rk4_inplace(p, x, f, h, k)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _process_step(plant, drive, row, tau_cmd, tau_real):
     n = plant.n_sub
     tau_b = plant.tb
@@ -101,7 +101,7 @@ def _process_step(plant, drive, row, tau_cmd, tau_real):
         plant.bias[i] = plant.bias_phi[i] * plant.bias[i] + plant.bias_std[i] * drive.bias_normals[row, i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _observer_truth(plant, truth):
     x = plant.x
     for i in range(truth.shape[0]):
@@ -130,7 +130,7 @@ def linear_advance(Phi, Delta, L, x, u, normals, tmp):
             x[i] = tmp[i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _observer_step(plant, drive, row, tau_cmd, tau_real):
     n = plant.n_sub
     u = plant.u
