@@ -20,7 +20,7 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from rovlab.params.edit import atomic_write_text
+from rovlab.core.files import atomic_write_text
 from rovlab.params.validate import ConfigError, Problem
 
 _MAX_PROBLEMS = 20  # stop collecting after this many bad cells (the rest are likely the same)

@@ -28,13 +28,16 @@ CONTROLLERS: dict[str, Callable[[Vehicle, DesignConfig], ControllerSpec]] = {
 def build_pair(vehicle: Vehicle, config: DesignConfig, *, estimator: str | None = None,
                controller: str | None = None, file: str | None = None) -> tuple[EstimatorSpec, ControllerSpec]:
     """Design the chosen estimator and controller; ConfigError if a name is unknown or the
-    controller needs something the estimator does not estimate."""
-    where = file or config.file or config.name
+    controller needs something the estimator does not estimate. ``estimator``/``controller``
+    override the configuration's choice (from ``file``, e.g. a scenario)."""
+    cfg_file = config.file or config.name
     est_name = estimator or config.estimator
     ctl_name = controller or config.controller
+    est_where = (file or cfg_file) if estimator else cfg_file
+    where = (file or cfg_file) if controller else cfg_file
     problems = []
     if est_name not in ESTIMATORS:
-        problems.append(Problem(where, "estimator", est_name, "one of: " + ", ".join(ESTIMATORS)))
+        problems.append(Problem(est_where, "estimator", est_name, "one of: " + ", ".join(ESTIMATORS)))
     if ctl_name not in CONTROLLERS:
         problems.append(Problem(where, "controller", ctl_name, "one of: " + ", ".join(CONTROLLERS)))
     if problems:
@@ -48,6 +51,6 @@ def build_pair(vehicle: Vehicle, config: DesignConfig, *, estimator: str | None 
                                    f"(estimator {est_name!r} estimates {', '.join(est.nav)})")],
                           "filter configuration")
     if abs(est.h - config.sample_time) > 1e-12:
-        raise ConfigError([Problem(where, "sample_time", config.sample_time,
+        raise ConfigError([Problem(cfg_file, "sample_time", config.sample_time,
                                    f"the estimator's sample time {est.h:g} s")], "filter configuration")
     return est, ctl

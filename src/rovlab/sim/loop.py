@@ -34,12 +34,13 @@ from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
     N_TRUTH, TRUTH_INDEX, controller_actuated, controller_step, estimator_correct, estimator_predict, plant_advance, plant_truth,
 )
-from rovlab.estimation.fusion import CH_STATUS, EVENT_USED, N_REP, REP_EVENT, REP_INNOV, REP_S
+from rovlab.estimation.fusion import CH_REASON, CH_STATUS, EVENT_USED, N_REP, REP_EVENT, REP_INNOV, REP_S
 from rovlab.models.sensors import sample_sensors
 from rovlab.sim.actuators import actuate
 
 N_WRENCH_LOG = 8  # allocated X, Y, Z, N, then demanded X, Y, Z, N
 _PSI = TRUTH_INDEX["psi"]
+_DIVERGED = 1e9  # a true state beyond this (or not finite) means the plant has diverged
 
 
 class Drive(NamedTuple):
@@ -58,6 +59,7 @@ class Logs(NamedTuple):
     truth: np.ndarray  # (n, N_TRUTH)
     y: np.ndarray  # (n, m) samples (NaN = none)
     status: np.ndarray  # (n, m) channel status codes (rovlab.estimation.fusion STATUS_*)
+    reason: np.ndarray  # (n, m) why a channel is lost or off (REASON_*)
     x: np.ndarray  # (n, n_x) corrected estimate
     P: np.ndarray  # (n, n_x, n_x) its covariance
     wrench: np.ndarray  # (n, N_WRENCH_LOG)
@@ -67,7 +69,7 @@ class Logs(NamedTuple):
 
 
 def new_logs(n: int, m: int, n_x: int, n_thrusters: int, n_ctrl_state: int) -> Logs:
-    return Logs(np.empty((n, N_TRUTH)), np.empty((n, m)), np.empty((n, m)), np.empty((n, n_x)),
+    return Logs(np.empty((n, N_TRUTH)), np.empty((n, m)), np.empty((n, m)), np.empty((n, m)), np.empty((n, n_x)),
                 np.empty((n, n_x, n_x)), np.empty((n, N_WRENCH_LOG)), np.empty((n, n_thrusters)),
                 np.empty((n, 3)), np.empty((n, n_ctrl_state)))
 
@@ -110,7 +112,9 @@ def _nees(err, P, idx, L):
 @njit(cache=True)
 def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive, logs):
     """Run control steps k0 .. k1-1 (t_k = k h). The components' state arrays are advanced in
-    place; ``drive`` and ``logs`` are indexed by row = k - k0.
+    place; ``drive`` and ``logs`` are indexed by row = k - k0. Returns the number of rows done:
+    k1 - k0, or fewer if the plant's true state stopped being finite (or beyond 1e9), in which
+    case the run stops there rather than log garbage.
 
     nav_of (int64, n_x): the TRUTH index each estimator state estimates; nees_idx (int64): the
     estimator states whose error enters the NEES (those the plant has a truth for); angle states
@@ -139,7 +143,8 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
     refs = drive.refs
     normals = drive.sensor_normals
     dropout = drive.dropout
-    log_truth, log_y, log_status, log_x, log_P = logs.truth, logs.y, logs.status, logs.x, logs.P
+    log_truth, log_y, log_status, log_reason = logs.truth, logs.y, logs.status, logs.reason
+    log_x, log_P = logs.x, logs.P
     log_wrench, log_pwm, log_cons, log_ctrl = logs.wrench, logs.pwm, logs.cons, logs.ctrl
     for k in range(k0, k1):
         row = k - k0
@@ -147,6 +152,8 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
         # -- truth and sensors at t_k ---------------------------------------------------------
         plant_truth(plant, truth)
         for i in range(N_TRUTH):
+            if not abs(truth[i]) < _DIVERGED:
+                return row  # the plant diverged (absurd parameters or forces): stop, rows 0..row-1 hold
             log_truth[row, i] = truth[i]
         sample_sensors(sensors, truth, k, normals, dropout, row, y, present)
         for j in range(m):
@@ -161,6 +168,7 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
         used = 0
         for j in range(m):
             log_status[row, j] = ch[j, CH_STATUS]
+            log_reason[row, j] = ch[j, CH_REASON]
             if rep[j, REP_EVENT] == EVENT_USED:
                 nis += rep[j, REP_INNOV] ** 2 / rep[j, REP_S]
                 used += 1
@@ -187,3 +195,4 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
         estimator_predict(est, t, tau_cmd)
         controller_actuated(ctrl, t, tau, tau_cmd)
         plant_advance(plant, drive, row, tau_cmd, tau_real)
+    return k1 - k0

@@ -55,10 +55,13 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     n = len(seeds)
     if workers == 1 or n == 1:
         out = []
-        for i, s in enumerate(seeds):
-            out.append(_one_run(data, file, s, book))
-            if progress:
-                progress(i + 1, n)
+        try:
+            for i, s in enumerate(seeds):
+                out.append(_one_run(data, file, s, book))
+                if progress:
+                    progress(i + 1, n)
+        except KeyboardInterrupt:  # keep what finished, as the parallel path does
+            print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
         return out
     size = max(1, min(50, n // (workers * 4) or 1))
     chunks = [seeds[i:i + size] for i in range(0, n, size)]

@@ -278,6 +278,17 @@ def _truth_vehicle(vehicle: Vehicle, sc: Scenario) -> Vehicle:
 # Running: the one call site of the compiled loop
 # --------------------------------------------------------------------------------------------
 
+class PlantDiverged(RuntimeError):
+    """The plant's true state stopped being finite: its parameters or forces are absurd."""
+
+    def __init__(self, t: float, logs: Logs, rows: int) -> None:
+        super().__init__(f"the plant diverged at t = {t:g} s (its true state is no longer finite): check the "
+                         "vehicle's and the scenario's parameters (masses, damping, disturbances)")
+        self.t = t
+        self.logs = logs  # rows 0 .. rows-1 are valid
+        self.rows = rows
+
+
 class Simulation:
     """The components of one run, advanced chunk by chunk through the compiled loop.
 
@@ -301,9 +312,11 @@ class Simulation:
         n = drive.refs.shape[0]
         logs = new_logs(n, len(prep.channels), self.estimator.x.shape[0], prep.actuators.rows.shape[0],
                         self.controller.state.shape[0])
-        run_loop(self.k, self.k + n, prep.h, self.plant, prep.sensors, self.estimator, self.controller,
-                 prep.actuators, prep.nav_of, prep.nees_idx, drive, logs)
-        self.k += n
+        done = run_loop(self.k, self.k + n, prep.h, self.plant, prep.sensors, self.estimator, self.controller,
+                        prep.actuators, prep.nav_of, prep.nees_idx, drive, logs)
+        self.k += done
+        if done < n:
+            raise PlantDiverged(self.k * prep.h, logs, done)
         return logs
 
 
@@ -351,6 +364,21 @@ class SimResult:
     channels: tuple[str, ...]
     thrusters: tuple[str, ...]
     meta: dict[str, Any]
+    reason: np.ndarray | None = None  # (K, m) why each channel is lost/off (fusion REASON_*)
+
+    def status_words(self) -> dict[str, list[str]]:
+        """status_<column> as words ('ok', 'recovering', 'lost-timeout', 'lost-gate', 'off' ...),
+        the same words `rovlab filter` writes."""
+        from rovlab.estimation.fusion import status_label
+
+        out = {}
+        for j, name in enumerate(k for k in self.columns if k.startswith("status_")):
+            codes = self.columns[name]
+            reasons = self.reason[:, j] if self.reason is not None else np.zeros(len(codes))
+            cache: dict[tuple[int, int], str] = {}
+            out[name] = [cache.setdefault((int(s), int(r)), status_label(int(s), int(r)))
+                         for s, r in zip(codes.tolist(), reasons.tolist())]
+        return out
 
 
 def run_prepared(prep: Prepared) -> SimResult:
@@ -379,7 +407,7 @@ def _result(prep: Prepared, logs: Logs) -> SimResult:
         "sample_time_s": prep.h, "plant_step_s": sc.plant_step_s,
     }
     return SimResult(sc, cols, logs.P, nees, tuple(est.states[i] for i in prep.nees_idx), nis,
-                     tuple(c.name for c in est.channels), tuple(prep.allocator.bank.names), meta)
+                     tuple(c.name for c in est.channels), tuple(prep.allocator.bank.names), meta, logs.reason)
 
 
 def simulate(name_or_path: str, *, seed: int | None = None) -> SimResult:
