@@ -73,7 +73,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
-from rovlab.params.vehicle import SENSOR_CHANNELS, Sensor, Vehicle
+from rovlab.params.vehicle import PLAUSIBLE, SENSOR_CHANNELS, Sensor, Vehicle
 
 OBSERVER_STATES = ("z", "psi", "w", "r", "b_w", "b_r")
 CONTROL_STATES = ("z", "psi", "w", "r")
@@ -86,6 +86,15 @@ _DEG = math.pi / 180.0
 _STATE_KEYS = {"z": (0, 1.0), "psi_deg": (1, _DEG), "w": (2, 1.0), "r_deg_s": (3, _DEG),
                "b_w": (4, 1.0), "b_r": (5, 1.0)}
 _LQR_STATE_KEYS = {"z": (0, 1.0), "psi_deg": (1, _DEG), "w": (2, 1.0), "r_deg_s": (3, _DEG)}
+# Plausibility outside the vehicle file's ranges (issue 15: a sample time of 1e-7 s meant 1e6
+# predictions per logged row; a bias time of 5e-324 s per kg a ValueError deep in the design).
+SAMPLE_TIME_RANGE = (1e-3, 10.0)  # h [s]: 1 kHz .. 0.1 Hz
+BIAS_TIME_PER_MASS_RANGE = (1e-3, 1e5)  # [s/kg]: the thesis uses 100
+BIAS_TIME_RANGE = (0.1, 1e8)  # T_w, T_r [s]
+PSD_RANGE = (0.0, 1e6)  # white-noise spectral densities, SI
+_MODEL_RANGES = {"mass": PLAUSIBLE["mass"], "I_zz": PLAUSIBLE["I_zz"], "Z_wdot": PLAUSIBLE["added_mass"],
+                 "N_rdot": PLAUSIBLE["added_mass"], "Z_w": PLAUSIBLE["damping_linear"],
+                 "N_r": PLAUSIBLE["damping_linear"]}
 
 
 @dataclass(frozen=True)
@@ -213,7 +222,8 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     name = top.string("name")
     description = top.string("description", "")
     sources["config"] = top.string("source")
-    h = top.number("sample_time", positive=True, what="filter and controller step in s")
+    h = top.number("sample_time", positive=True, plausible=SAMPLE_TIME_RANGE,
+                   what="filter and controller step in s")
 
     overrides: dict[str, float] = {}
     if top.has("model"):
@@ -222,9 +232,10 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         for key in MODEL_KEYS:
             if mt.has(key):
                 if key in ("mass", "I_zz"):
-                    overrides[key] = mt.number(key, positive=True)
+                    overrides[key] = mt.number(key, positive=True, plausible=_MODEL_RANGES[key])
                 else:
-                    overrides[key] = mt.number(key, nonpositive=True, what="SNAME sign: <= 0")
+                    overrides[key] = mt.number(key, nonpositive=True, plausible=_MODEL_RANGES[key],
+                                               what="SNAME sign: <= 0")
         mt.finish()
 
     pn = top.table("process_noise")
@@ -232,7 +243,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     psd = np.zeros(6)
     pt = pn.table("psd")
     for i, key in enumerate(PSD_KEYS):
-        psd[2 + i] = pt.number(key, nonnegative=True, what="power spectral density, SI")
+        psd[2 + i] = pt.number(key, nonnegative=True, plausible=PSD_RANGE, what="power spectral density, SI")
     pt.finish()
     per_mass: float | None = None
     constants: tuple[float, float] | None = None
@@ -242,10 +253,12 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         pn.raw("bias_time_per_mass", None)
         pn.raw("bias_time_constant", None)
     elif pn.has("bias_time_per_mass"):
-        per_mass = pn.number("bias_time_per_mass", positive=True, what="T = factor * M")
+        per_mass = pn.number("bias_time_per_mass", positive=True, plausible=BIAS_TIME_PER_MASS_RANGE,
+                             what="T = factor * M, s/kg")
     else:
         bt = pn.table("bias_time_constant")
-        constants = (bt.number("w", positive=True, what="s"), bt.number("r", positive=True, what="s"))
+        constants = (bt.number("w", positive=True, plausible=BIAS_TIME_RANGE, what="s"),
+                     bt.number("r", positive=True, plausible=BIAS_TIME_RANGE, what="s"))
         bt.finish()
     pn.finish()
 
@@ -276,6 +289,12 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     lt = top.table("lqr")
     sources["lqr"] = lt.string("source")
     Q, R, bryson = _lqr_weights(lt)
+    with np.errstate(all="ignore"):
+        if np.all(~np.isnan(Q)) and np.all(~np.isnan(R)) and not (
+                np.all(np.isfinite(Q)) and np.all(np.isfinite(R)) and np.all(R > 0)):
+            lt.problem("state_max" if bryson else "Q_diag", {"Q": Q.tolist(), "R": R.tolist()},
+                       "weights that are finite (and positive for the inputs): a maximum so small "
+                       "that 1/max^2 overflows is not a limit")
     reference = lt.string("reference_gain", "discrete", choices=("discrete", "continuous"))
     lt.finish()
     top.finish()
@@ -380,8 +399,9 @@ def _lqr_weights(t: TableReader) -> tuple[np.ndarray, np.ndarray, dict[str, np.n
     sub.finish()
     # Bryson's rule (Bryson & Ho 1975): weight_i / max_i^2. Kept as plain arithmetic here so the
     # params layer does not import rovlab.control; rovlab.control.lqr.bryson is the same rule.
-    Q = sw / smax**2
-    R = uw / umax**2
+    with np.errstate(over="ignore", divide="ignore"):  # an overflow is reported by the caller
+        Q = sw / smax**2
+        R = uw / umax**2
     return Q, R, {"state_max": smax, "input_max": umax, "state_weight": sw, "input_weight": uw}
 
 
