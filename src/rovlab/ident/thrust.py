@@ -26,7 +26,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rovlab.ident.fitting import IdentificationError, covariance_from_jacobian, lowpass, sample_rate
-from rovlab.io.tables import DataTable, read_table
+from rovlab.io.tables import require_increasing, DataTable, read_table
 from rovlab.params.vehicle import QuadraticCurve
 
 KGF = 9.80665  # N per kilogram-force
@@ -275,7 +275,9 @@ LOG_COLUMNS = ("time_s", "pwm_us", "force_n")
 
 def read_thrust_log(path: str | Path) -> DataTable:
     """A load-cell log with columns time_s, pwm_us, force_n (clear errors otherwise)."""
-    return read_table(path, required=LOG_COLUMNS, what="thrust log")
+    table = read_table(path, required=LOG_COLUMNS, what="thrust log")
+    require_increasing(table, "time_s")
+    return table
 
 
 def read_thrust_table(path: str | Path) -> tuple[np.ndarray, np.ndarray, str]:

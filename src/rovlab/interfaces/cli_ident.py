@@ -213,13 +213,22 @@ def _user_error(msg: str) -> Exception:
 
 def _run(file: str, fn: Callable[[], Any]) -> Any:
     """Call an identification, turning its IdentificationError into a clean user error."""
+    import numpy as np
+
     from rovlab.ident.fitting import IdentificationError
 
     try:
-        return fn()
+        # The readers refuse implausible magnitudes; should a fit still overflow or divide by
+        # zero, stop with a message instead of a traceback or NaN estimates (and keep LAPACK from
+        # printing its own complaints about non-finite input).
+        with np.errstate(over="raise", divide="raise", invalid="raise", under="ignore"):
+            return fn()
     except IdentificationError as exc:
         text = str(exc)  # messages about a run already start with the file's name
         raise _user_error(text if text.startswith(f"{file}:") else f"{file}: {text}") from None
+    except (FloatingPointError, ZeroDivisionError, OverflowError, np.linalg.LinAlgError) as exc:
+        raise _user_error(f"{file}: the data cannot be fitted ({type(exc).__name__}: {exc}); expected a log of "
+                          "the experiment in SI units (check the columns' units and scaling)") from None
 
 
 def _clean(x: Any) -> Any:

@@ -311,9 +311,11 @@ def _read_thruster(t: TableReader) -> Thruster:
     name = t.name("name")
     position = _bounded_vector(t, "position", PLAUSIBLE["position"], "m from VO, body frame")
     direction = t.vector("direction", 3, what="unit thrust direction")
-    if np.all(np.isfinite(direction)) and abs(float(np.linalg.norm(direction)) - 1.0) > 1e-6:
-        t.problem("direction", direction.tolist(),
-                  f"a unit vector (its norm is {np.linalg.norm(direction):.6g})")
+    with np.errstate(over="ignore"):
+        norm = float(np.sqrt(np.sum(np.square(direction)))) if np.all(np.isfinite(direction)) else 1.0
+    if not abs(norm - 1.0) <= 1e-6:
+        t.problem("direction", direction.tolist(), f"a unit vector (its norm is {norm:.6g})")
+        direction = np.full(3, np.nan)
     model = t.string("model", "quadratic", choices=("quadratic", "table"))
     curve = None
     table = None
