@@ -211,8 +211,32 @@ def identify_towing(table: DataTable, rig: DataTable | None = None, *, terms: Se
     return fit_steady_damping(pts, rig_pts, terms=terms, dof=dof, what="towing")
 
 
+SPEED_COLUMNS = {"u_mps": "surge", "v_mps": "sway", "w_mps": "heave"}
+
+
 def read_towing(path: str | Path) -> DataTable:
-    return read_table(path, required=COLUMNS, what="towing log")
+    """A towing log. The speed column is ``speed_mps``, or ``u_mps`` / ``v_mps`` / ``w_mps``, which
+    also say the DOF (read back by :func:`dof_of_log`)."""
+    table = read_table(path, what="towing log")
+    named = [c for c in SPEED_COLUMNS if table.has(c)]
+    if len(named) == 1 and not table.has("speed_mps"):
+        col = named[0]
+        data = {("speed_mps" if k == col else k): v for k, v in table.data.items()}
+        columns = tuple("speed_mps" if c == col else c for c in table.columns)
+        table = DataTable(table.file, columns, data, table.lines,
+                          table.comments + (f"dof = {SPEED_COLUMNS[col]}",))
+    table.require(*COLUMNS)
+    return table
+
+
+def dof_of_log(table: DataTable) -> str | None:
+    """The DOF a towing log says it is (a u/v/w_mps speed column, or the virtual lab's
+    ``# setting.dof = ...`` line), None if it does not say."""
+    meta = table.meta()
+    for key in ("dof", "setting.dof"):
+        if meta.get(key) in DOFS:
+            return meta[key]
+    return None
 
 
 def damping_edits(fit: DampingFit, dof: str, *, digits: int = 4) -> dict[str, float]:

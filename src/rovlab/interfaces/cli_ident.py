@@ -4,8 +4,9 @@ Interfaces hold no maths: these read files, call :mod:`rovlab.ident`, print the 
 or JSON with ``--json``), draw the fit's PNG and, with ``--update``, write the estimates into a
 vehicle file through :mod:`rovlab.params.edit` (validated before anything is written).
 
-Plots: by default each ``identify`` writes ``<input stem>-<tool>.png`` next to the input file
-(``--plot PNG`` to choose, ``--no-plot`` to skip); ``added-mass`` plots only with ``--plot``.
+Plots: by default each ``identify`` writes ``<input stem>-<tool>.png`` into the working directory
+(never next to the input, which may be packaged data inside the installed package; ``--plot PNG``
+to choose, ``--no-plot`` to skip); ``added-mass`` plots only with ``--plot``.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     common.add_argument("--plot", metavar="PNG", help="write the fit's figure here (default: <input stem>-<tool>.png "
-                        "next to the input file)")
+                        "in the working directory)")
     common.add_argument("--no-plot", action="store_true", help="do not write a figure")
     common.add_argument("--update", metavar="VEHICLE.toml",
                         help="write the estimates into this vehicle file (comments kept, source note added, "
@@ -98,7 +99,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file")
     p.add_argument("--rig", metavar="FILE", help="rig-only runs (same columns) whose drag is subtracted")
     p.add_argument("--terms", default="linear,quadratic,cubic", help="terms to fit (default linear,quadratic,cubic)")
-    p.add_argument("--dof", choices=("surge", "sway", "heave"), default="surge", help="DOF towed (for --update)")
+    p.add_argument("--dof", choices=("surge", "sway", "heave"),
+                   help="DOF towed; required unless the log says it: a speed column u_mps (surge), v_mps (sway) "
+                        "or w_mps (heave) instead of speed_mps, or the virtual lab's '# setting.dof' line")
     p.add_argument("--min-steady", type=_positive, default=2.0, metavar="S", help="shortest usable steady window (2 s)")
     p.add_argument("--trim", type=_nonnegative, default=1.0, metavar="S", help="seconds cut from each end of a window (1)")
     p.add_argument("--no-tare", action="store_true", help="do not subtract the force at rest around each run")
@@ -134,6 +137,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detrend", type=int, default=1, choices=(0, 1, 2, 3),
                    help="degree of the drift polynomial removed (1: linear)")
     p.add_argument("--allan", action="store_true", help="also compute the Allan deviation")
+    p.add_argument("--no-stationarity-check", action="store_true",
+                   help="accept channels that do not look like noise at rest (steps, a staircase, wandering)")
     p.set_defaults(func=_cmd_noise)
 
     am = sub.add_parser("added-mass", help="added mass from box geometry (DNV-RP-H103, SPEC 9.4)",
@@ -252,7 +257,8 @@ def _emit(args: argparse.Namespace, data: dict[str, Any], text: str) -> None:
 
 
 def _plot(args: argparse.Namespace, tool: str, draw: Callable[[Path], Any]) -> str | None:
-    """Write the figure (default next to the input file); a missing matplotlib only warns."""
+    """Write the figure (default: ``<input stem>-<tool>.png`` in the working directory); a missing
+    matplotlib only warns."""
     from rovlab.ident import plots
     from rovlab.ident.plots import PlotUnavailable
 
@@ -261,8 +267,7 @@ def _plot(args: argparse.Namespace, tool: str, draw: Callable[[Path], Any]) -> s
     if args.plot:
         path = Path(args.plot)
     elif getattr(args, "file", None):
-        src = Path(args.file)
-        path = src.with_name(f"{src.stem}-{tool}.png")
+        path = Path(f"{Path(args.file).stem}-{tool}.png")
     else:
         return None
     if path.suffix.lower() not in plots.FORMATS:
@@ -419,6 +424,7 @@ def _cmd_towing(args: argparse.Namespace) -> int:
 
     table = towing.read_towing(args.file)
     rig = towing.read_towing(args.rig) if args.rig else None
+    args.dof = _towing_dof(args, table)
     fit = _run(args.file, lambda: towing.identify_towing(table, rig, terms=_terms(args.terms), dof=args.dof,
                                                          min_s=args.min_steady, trim_s=args.trim,
                                                          tare=not args.no_tare))
@@ -430,6 +436,24 @@ def _cmd_towing(args: argparse.Namespace) -> int:
     text = _damping_text(fit, args.file, f"{args.dof} damping (SNAME)") + (f"\n  figure: {png}" if png else "")
     _emit(args, data, text)
     return 0
+
+
+def _towing_dof(args: argparse.Namespace, table) -> str:
+    """The towed DOF: --dof, or what the log says. Never a silent default (a heave log used to be
+    reported, and written with --update, as surge)."""
+    from rovlab.ident import towing
+
+    found = towing.dof_of_log(table)
+    if args.dof is None:
+        if found is None:
+            raise _user_error(f"{args.file}: which DOF was towed? the log does not say (its speed column is "
+                              "speed_mps, not u_mps, v_mps or w_mps, and it has no '# setting.dof' line); "
+                              "expected --dof surge, --dof sway or --dof heave")
+        return found
+    if found is not None and found != args.dof:
+        raise _user_error(f"{args.file}: --dof {args.dof}, but the log says it is a {found} towing log; expected "
+                          f"--dof {found} (or no --dof)")
+    return args.dof
 
 
 def _cmd_yaw(args: argparse.Namespace) -> int:
@@ -506,7 +530,8 @@ def _cmd_noise(args: argparse.Namespace) -> int:
     from rovlab.ident import noise, plots
 
     table, cols = noise.read_noise(args.file)
-    est = _run(args.file, lambda: noise.noise_variances(table["time_s"], cols, detrend=args.detrend, allan=args.allan))
+    est = _run(args.file, lambda: noise.noise_variances(table["time_s"], cols, detrend=args.detrend, allan=args.allan,
+                                                        check_stationary=not args.no_stationarity_check))
     png = _plot(args, "noise", lambda p: plots.plot_noise(est, p, title=f"Resting log {Path(args.file).name}: "
                                                                         f"drift (degree {args.detrend}) removed"))
     updated = None
