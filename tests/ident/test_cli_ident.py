@@ -388,3 +388,35 @@ def test_plot_of_packaged_data_goes_to_the_working_directory(capsys, tmp_path, m
     data = run_json(capsys, "identify", "thrust", str(table), "--table")
     assert data["plot"] == "T200-Thrusters-16V-thrust.png" and (tmp_path / data["plot"]).exists()
     assert {p.name for p in Path(str(table)).parent.iterdir()} == before
+
+
+def test_update_on_a_read_only_or_full_disk_fails_cleanly(capsys, tmp_path, vehicle_copy, monkeypatch):
+    # issue 15: an OSError traceback, and a temporary file left behind
+    import errno
+    import os
+
+    import rovlab.params.edit as edit
+
+    log = tmp_path / "rest.csv"
+    run(capsys, "lab", "noise", "--seed", 3, "--samples", "300", "--out", log)
+    before = vehicle_copy.read_text(encoding="utf-8")
+    folder_before = sorted(p.name for p in vehicle_copy.parent.iterdir())
+
+    def full_disk(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(edit.os, "fsync", full_disk)
+    code, _, err = run(capsys, "identify", "noise", log, "--no-plot", "--update", vehicle_copy)
+    assert code == 2 and str(vehicle_copy) in err and "No space left on device" in err and "Traceback" not in err
+    assert vehicle_copy.read_text(encoding="utf-8") == before
+    assert sorted(p.name for p in vehicle_copy.parent.iterdir()) == folder_before  # no temporary file left
+    monkeypatch.undo()
+
+    vehicle_copy.chmod(0o444)
+    try:
+        code, _, err = run(capsys, "identify", "noise", log, "--no-plot", "--update", vehicle_copy)
+    finally:
+        vehicle_copy.chmod(0o644)
+    if os.geteuid() != 0:  # root may write anything: os.access says so
+        assert code == 2 and "read-only" in err
+    assert vehicle_copy.read_text(encoding="utf-8") == before or code == 0

@@ -15,6 +15,7 @@ import argparse
 import datetime as _dt
 import json
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any, Callable
@@ -296,6 +297,10 @@ def _check_update_target(path: str) -> Path:
     pkg = packaged_vehicle_path("x").parent.resolve()
     if p.resolve().parent == pkg:
         raise _user_error(f"--update: {path} is a packaged vehicle file; copy it and update the copy")
+    if not p.is_file():
+        raise _user_error(f"--update: {path} is not a file; expected a vehicle TOML file")
+    if not os.access(p, os.W_OK):
+        raise _user_error(f"--update: {path} is read-only; expected a vehicle file you may write (nothing was written)")
     return p
 
 
@@ -306,7 +311,11 @@ def _update(args: argparse.Namespace, edits: dict[str, Any], blocks: list[str], 
 
     target = _check_update_target(args.update)
     note = f"{what} ({_dt.date.today().isoformat()})"
-    edit_vehicle_file(target, edits, sources={b: note for b in blocks})
+    try:
+        edit_vehicle_file(target, edits, sources={b: note for b in blocks})
+    except OSError as exc:  # a read-only folder, a full disk: the file is left as it was
+        raise _user_error(f"--update: cannot write {target}: {exc.strerror or exc}; the file is unchanged "
+                          "(nothing was written)") from None
     print(f"updated {target}: " + ", ".join(k for k, v in edits.items() if not _is_delete(v))
           + f"; source note: {note}", file=sys.stderr)
     return str(target)
