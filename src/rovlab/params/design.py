@@ -92,6 +92,9 @@ SAMPLE_TIME_RANGE = (1e-3, 10.0)  # h [s]: 1 kHz .. 0.1 Hz
 BIAS_TIME_PER_MASS_RANGE = (1e-3, 1e5)  # [s/kg]: the thesis uses 100
 BIAS_TIME_RANGE = (0.1, 1e8)  # T_w, T_r [s]
 PSD_RANGE = (0.0, 1e6)  # white-noise spectral densities, SI
+# initial state (and its standard deviation) per file key, in the file's units
+_STATE_RANGES = {"z": (-1e4, 1e4), "psi_deg": (-720.0, 720.0), "w": (-10.0, 10.0), "r_deg_s": (-720.0, 720.0),
+                 "b_w": (-1e4, 1e4), "b_r": (-1e3, 1e3)}
 _MODEL_RANGES = {"mass": PLAUSIBLE["mass"], "I_zz": PLAUSIBLE["I_zz"], "Z_wdot": PLAUSIBLE["added_mass"],
                  "N_rdot": PLAUSIBLE["added_mass"], "Z_w": PLAUSIBLE["damping_linear"],
                  "N_r": PLAUSIBLE["damping_linear"]}
@@ -267,7 +270,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     x0 = _state_table(it, "state", _STATE_KEYS, nonnegative=False)
     std = _state_table(it, "std", _STATE_KEYS, nonnegative=True)
     with np.errstate(over="ignore"):
-        huge = [k for k, (i, _) in _STATE_KEYS.items() if not np.isfinite(std[i] ** 2)]
+        huge = [k for k, (i, _) in _STATE_KEYS.items() if np.isfinite(std[i]) and not np.isfinite(std[i] ** 2)]
     for key in huge:  # P0 = diag(std^2) must be finite
         i, factor = _STATE_KEYS[key]
         it.problem(f"std.{key}", float(std[i] / factor), "a standard deviation whose square is finite")
@@ -316,7 +319,8 @@ def _state_table(t: TableReader, name: str, keys: Mapping[str, tuple[int, float]
     sub = t.table(name, required=False)
     for key, (i, factor) in keys.items():
         if sub.has(key):
-            out[i] = sub.number(key, nonnegative=nonnegative) * factor
+            lo, hi = _STATE_RANGES[key]
+            out[i] = sub.number(key, nonnegative=nonnegative, plausible=(0.0 if nonnegative else lo, hi)) * factor
     sub.finish()
     return out
 
