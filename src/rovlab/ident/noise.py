@@ -1,4 +1,4 @@
-"""Sensor noise variances from resting logs (SPEC section 9.6; thesis sec. 4.4.1, table 4.8).
+"""Sensor noise variances from resting logs (Sandøy 2016, sec. 4.4.1, table 4.8).
 
 The vehicle rests (weighted down on the basin floor in the thesis, 6796 samples at 10 Hz). Each
 channel's slow drift (temperature, tide, a settling vehicle) is removed by a least-squares

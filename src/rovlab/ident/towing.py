@@ -1,11 +1,11 @@
-"""Damping from towing-carriage runs (SPEC section 9.2; thesis sec. 4.3.1).
+"""Damping from towing-carriage runs (Sandøy 2016, sec. 4.3.1).
 
 Each run tows the vehicle at one constant speed (five positive and five negative speeds in
 [-0.5, 0.5] m/s per DOF in the thesis). Per run, the steady window is found on the speed trace,
 the load cell is tared with the mean force at rest before the run starts and after it ends
 (removes the cell's offset and, in heave, the net buoyancy), and the mean force over the window is the steady force.
 Runs of the rig alone (same file format) give the rig's own drag, fitted with the same terms
-and subtracted. Then, with SNAME signs (SPEC section 1),
+and subtracted. Then, with SNAME signs (Fossen 2011; Sandøy 2016, sec. 3.1),
 
     force_n = -(X_u u + X_|u|u |u| u + X_uuu u^3)        (force the rig applies to the vehicle)
 

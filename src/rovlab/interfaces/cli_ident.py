@@ -1,4 +1,4 @@
-"""Sub-commands ``identify``, ``added-mass`` and ``lab`` (SPEC section 9; docs/identification.md).
+"""Sub-commands ``identify``, ``added-mass`` and ``lab`` (Sandøy 2016, sec. 2.3 and ch. 4; docs/identification.md).
 
 Interfaces hold no maths: these read files, call :mod:`rovlab.ident`, print the result (a table,
 or JSON with ``--json``), draw the fit's PNG and, with ``--update``, write the estimates into a
@@ -69,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="write the estimates into this vehicle file (comments kept, source note added, "
                              "validated before writing)")
 
-    ident = sub.add_parser("identify", help="identify vehicle parameters from lab data (SPEC 9)",
+    ident = sub.add_parser("identify", help="identify vehicle parameters from lab data (Sandøy 2016, sec. 2.3 and ch. 4)",
                            description="Identify vehicle parameters from the logs of the lab experiments. " + SIGN_NOTE)
     isub = ident.add_subparsers(dest="ident_command", metavar="EXPERIMENT")
     isub.required = True
@@ -142,7 +142,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="accept channels that do not look like noise at rest (steps, a staircase, wandering)")
     p.set_defaults(func=_cmd_noise)
 
-    am = sub.add_parser("added-mass", help="added mass from box geometry (DNV-RP-H103, SPEC 9.4)",
+    am = sub.add_parser("added-mass", help="added mass from box geometry (DNV-RP-H103, Sandøy 2016, sec. 4.2.1)",
                         description="Eidsvik's empirical method on DNV-RP-H103 tables. Give the six dimensions "
                                     "or --vehicle to use its [geometry]. " + SIGN_NOTE)
     for name, unit in (("length", "M"), ("width", "M"), ("height", "M"), ("area-front", "M2"), ("area-side", "M2"),
@@ -595,7 +595,7 @@ def _cmd_added_mass(args: argparse.Namespace) -> int:
                       "rovlab added-mass: Eidsvik/DNV-RP-H103 from L, W, H = "
                       f"{dims['length']:g}, {dims['width']:g}, {dims['height']:g} m")
     data = est.as_dict() | {"inputs": dims | {"rho": rho}, "plot": png, "updated": updated}
-    lines = ["added mass (SNAME; Eidsvik's method on DNV-RP-H103 tables, SPEC 9.4)",
+    lines = ["added mass (SNAME; Eidsvik's method on DNV-RP-H103 tables, Sandøy 2016, sec. 4.2.1)",
              f"  X_udot = {est.X_udot:9.4f} kg", f"  Y_vdot = {est.Y_vdot:9.4f} kg",
              f"  Z_wdot = {est.Z_wdot:9.4f} kg", f"  N_rdot = {est.N_rdot:9.4f} kg m^2",
              f"  lambda = {est.scale:.4f}; c_xy = {est.c_xy:.4f}, c_yz = {est.c_yz:.4f}, c_xz = {est.c_xz:.4f}",

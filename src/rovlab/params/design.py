@@ -1,14 +1,14 @@
 """Filter and controller configuration: a frozen, validated, closed-schema TOML file.
 
 A configuration holds everything the depth-and-heading observer and the LQR need beyond the
-vehicle file (SPEC sections 5-6): the sample time, optional overrides of the model parameters,
+vehicle file (Sandøy 2016, secs. 5.1-5.2): the sample time, optional overrides of the model parameters,
 the white-noise power spectral densities W and the bias time constants, the measurement set
 (which sensor channels are fused, their variances and the sensor-management settings), the
 initial belief and the LQR weights. Packaged configurations live in ``params/configs``:
 
 * ``default``: the vehicle file's own model parameters and sensor variances; motion capture z
   and psi plus pressure depth; a wide initial covariance so the filter locks on from any start.
-* ``thesis``: the design values of Sandøy 2016 (appendix scripts A.3-A.4, SPEC sections 5-6).
+* ``thesis``: the design values of Sandøy 2016 (secs. 5.1-5.2, appendix scripts A.3-A.4).
 
 File format (every table is closed: unknown keys are errors; ``source`` is required)::
 

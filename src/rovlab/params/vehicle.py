@@ -62,7 +62,7 @@ def _frozen(a: Any) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class QuadraticCurve:
-    """Dead-band thrust curve f = K_L s + K_NL s|s| with s = u -/+ d (SPEC section 3).
+    """Dead-band thrust curve f = K_L s + K_NL s|s| with s = u -/+ d (Sandøy 2016, ch. 2).
 
     Coefficients are per microsecond of PWM offset: K_L in N/us, K_NL in N/us^2; all >= 0.
     """

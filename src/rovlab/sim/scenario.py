@@ -5,7 +5,7 @@ initial state, the reference schedule, drop-out windows, the true disturbances a
 
     name = "dropout"
     description = "..."
-    source = "Sandøy 2016, fig. 5.4; SPEC section 7, case 3"
+    source = "Sandøy 2016, sec. 5.3.1 and fig. 5.4 (case 3)"
     vehicle = "udrone"              # packaged name, or a path relative to this file
     design = "thesis"               # filter/controller configuration (name or path)
     plant = "process"               # "process": nonlinear 4-DOF model with thrusters, noise and
