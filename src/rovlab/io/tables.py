@@ -29,7 +29,8 @@ _MAX_PROBLEMS = 20  # stop collecting after this many bad cells (the rest are li
 # A number as a lab instrument writes it: ASCII digits, optional sign, decimal point and
 # exponent. Python's float() also takes '1_000' and '１２' (other scripts' digits); those are
 # refused, as is anything that is not finite.
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:inf|infinity|nan)", re.IGNORECASE)
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:inf|infinity|nan)",
+                     re.IGNORECASE | re.ASCII)
 
 # Plausible magnitudes of a lab log's values, by the unit suffix of the column name (SI; see
 # docs/identification.md). A fuzzer's times or positions scaled by 1e154 or 1e-300 used to end in
