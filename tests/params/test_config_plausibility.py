@@ -30,3 +30,11 @@ def test_implausible_configuration_is_refused_with_exit_2(tmp_path, capsys, old,
     assert lines, err
     assert expected in lines[0]
     assert "Traceback" not in err
+
+
+def test_a_configuration_name_with_a_newline_is_refused(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text(THESIS_TEXT.replace('name = "thesis"', 'name = "the\\nsis"', 1), encoding="utf-8")
+    assert main(["design", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: name:" in err and "one line" in err

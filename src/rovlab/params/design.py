@@ -222,7 +222,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     col = Collector(file)
     top = TableReader(dict(data), col)
     sources: dict[str, str] = {}
-    name = top.string("name")
+    name = top.name("name")
     description = top.string("description", "")
     sources["config"] = top.string("source")
     h = top.number("sample_time", positive=True, plausible=SAMPLE_TIME_RANGE,
