@@ -231,9 +231,9 @@ def _fuzz_toml(base: Path, n: int, seed: int, tmp_path: Path, capfd, argv_for: C
     return accepted
 
 
-def _vehicle_argv(path: Path) -> list[list[str]]:
+def _vehicle_argv(path: Path, config: str = "default") -> list[list[str]]:
     return [["vehicle", "check", str(path)], ["vehicle", "show", str(path), "--json"],
-            ["design", "--vehicle", str(path), "--config", "default", "--allow-unobservable"]]
+            ["design", "--vehicle", str(path), "--config", config, "--allow-unobservable"]]
 
 
 def _config_argv(path: Path) -> list[list[str]]:
@@ -351,7 +351,8 @@ def test_fuzz_lab_logs(tmp_path, capfd, lab_logs, experiment):
 @pytest.mark.parametrize("seed", [101, 102])
 def test_fuzz_long(tmp_path, capfd, lab_logs, seed, monkeypatch):
     n = BUDGET or LARGE
-    _fuzz_toml(packaged_vehicle_path("bluerov2_heavy"), n, seed, tmp_path, capfd, _vehicle_argv)
+    _fuzz_toml(packaged_vehicle_path("bluerov2_heavy"), n, seed, tmp_path, capfd,
+               lambda path: _vehicle_argv(path, "bluerov2_heavy"))
     _fuzz_toml(packaged_config_path("default"), n, seed, tmp_path, capfd, _config_argv)
     _fuzz_toml(_short_scenario(tmp_path), n // 3, seed, tmp_path, capfd, _scenario_argv(tmp_path))
     for experiment, text in lab_logs.items():
