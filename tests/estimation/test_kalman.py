@@ -249,20 +249,29 @@ def test_chi2_gate_rejects_an_outlier_like_a_missing_sample(filt, thesis_model):
     assert run_s.innovation[100, 0] ** 2 / run_s.innovation_variance[100, 0] > thesis_model.channels[0].gate_threshold
 
 
-def test_chi2_gate_declares_a_sensor_lost_and_reacquires_it(filt, thesis_model):
+def test_chi2_gate_declares_a_sensor_lost_and_it_returns(filt, thesis_model):
     t, u, y, _ = simulate(thesis_model, 400, seed=10)
-    y[100:103, 0] += 0.05  # three consecutive outliers: lost
-    y[200:, 2] += 0.5  # heading sensor re-zeroed by 0.5 rad: disagrees for good
+    y[100:103, 0] += 0.05  # three consecutive outliers, the pressure sensor disagreeing: lost
     run = filt.run(t, u, y)
     labels = run.status_labels(0)
     assert labels[101] == "ok" and labels[102] == "lost-gate"
-    assert labels[103] == "recovering"  # the next good sample passes the (wider) gate
-    psi = run.status_labels(2)
-    assert psi[202] == "lost-gate"
-    # back within reacquire_after_s (5 s) at the latest: through the wider gate as the heading
-    # variance grows while dead reckoning, or re-admitted after disagreeing that long
-    k_back = 200 + int(round(thesis_model.channels[2].reacquire_after_s / thesis_model.h))
-    assert 202 < psi.index("recovering", 202) <= k_back
+    assert labels[103] == "recovering"  # the next good sample passes the gate
+
+
+def test_a_persistent_deviation_without_a_witness_is_followed(filt, thesis_model):
+    # Heading sensor re-zeroed by 0.5 rad: with no other heading sensor nothing can tell an offset
+    # from a change the model missed. The first sample is rejected as an outlier; the next one
+    # repeats the deviation (persistence): the heading variance is widened to cover it and the
+    # sample used. No loss, the filter is on the sensor at once, and the yaw-rate estimate is not
+    # kicked (a plain update of this 0.5 rad innovation through the psi-r correlation sent r_hat
+    # to 7 rad/s).
+    t, u, y, X = simulate(thesis_model, 400, seed=10)
+    y[200:, 2] += 0.5
+    run = filt.run(t, u, y)
+    assert run.event[200, 2] == 2 and np.all(run.event[201:, 2] == 1)
+    assert set(run.status_labels(2)) == {"ok"}
+    assert abs(math.remainder(run.x[201, 1] - (y[201, 2]), 2 * math.pi)) < 0.01
+    assert np.max(np.abs(run.x[195:, 3] - X[195:, 3])) < 0.05
 
 
 def test_sensors_that_agree_with_each_other_overrule_a_wrong_prediction(filt, thesis_model):
@@ -304,12 +313,13 @@ def test_an_offset_sensor_stays_out_while_a_redundant_sensor_confirms_the_predic
     assert np.max(np.abs(run.x[200:, 0] - X[200:, 0])) < 0.03  # depth follows the pressure sensor
 
 
-def test_reacquire_after_persistent_disagreement_without_a_witness(filt, thesis_model):
-    # The same offset with no pressure sensor: nothing says who is right, and disagreeing for
-    # reacquire_after_s points to a diverged estimate: the sensor is re-admitted (recovering),
-    # through the gate as the dead-reckoned depth variance grows, or re-acquired at the latest.
+def test_reacquire_after_erratic_disagreement_without_a_witness(filt, thesis_model):
+    # Qualisys z off by 20 cm +- 5 cm at random (not a persistent deviation) and no pressure
+    # sensor: every sample fails the gate, so it is lost; after disagreeing for reacquire_after_s
+    # with no witness it is re-admitted (or comes back earlier through the growing depth variance).
     t, u, y, _ = simulate(thesis_model, 400, seed=17)
-    y[200:, 0] += 0.2
+    rng = np.random.default_rng(3)
+    y[200:, 0] += 0.2 + rng.uniform(-0.05, 0.05, 200)
     y[:, 1] = np.nan  # no pressure sensor at all (lost by timeout at the start)
     run = filt.run(t, u, y)
     labels = run.status_labels(0)
@@ -318,7 +328,6 @@ def test_reacquire_after_persistent_disagreement_without_a_witness(filt, thesis_
     back = labels.index("recovering", 202)
     assert 202 < back <= k_back
     assert np.all(run.event[203:back, 0] == 2)
-    assert abs(run.x[-1, 0] - (y[-1, 0] - thesis_model.channels[0].offset)) < 0.01  # follows the sensor again
 
 
 def test_non_finite_inputs_never_poison_the_state(filt, thesis_model):

@@ -39,12 +39,30 @@ Checks against the prediction:
   their difference, variance R_i + R_j): the prediction is what is wrong. Both samples must
   still pass the gate with R widened 1e4 times, so two sensors reporting the same absurd value
   do not overrule the model.
+* **persistence**: a sample that fails the gate right after a sample of the same channel that
+  failed it too, by the same amount (chi-square on the difference of the two innovations), is
+  used -- unless a witness (below) refutes it. The prediction
+  was then overconfident: the variance of the measured state is widened so that this
+  innovation is a 1-sigma event (a covariance reset of that state, as navigation filters do
+  when a measurement has been rejected too long; the adaptive fading filter of Xia et al. 1994
+  scales P by an innovation-driven factor instead, which here would claim the velocity and
+  bias are as wrong as the heading). An outlier is
+  isolated; a deviation that persists is a change the model missed (a rare large process-noise
+  event, an unmodelled force), and rejecting it makes the filter dead-reckon further away from
+  the truth with every sample. With no witness, a sensor offset cannot be told from that, and
+  the sensor is followed (as it would be after ``reacquire`` seconds anyway). The widened
+  variance is the measured state's alone, so the update moves that state to the sample without
+  dragging the velocity and bias estimates along through P's correlations (their gains shrink
+  as S grows); spreading the correction instead (the recovery ramp) was tried and let the
+  estimate fall behind a real change of the truth.
 * **re-acquisition**: a channel lost by the gate whose samples keep failing it for
-  ``reacquire`` seconds is re-admitted (RECOVERING) -- unless another channel of the same state
-  has confirmed the prediction within its timeout (passed the gate on its own): then the model
-  is corroborated by an independent sensor and the disagreeing sensor stays out (an offset
-  sensor). Without such a witness, disagreeing that long points to a diverged estimate rather
-  than to an outlier, and dead reckoning forever is the worse failure. 0 disables this.
+  ``reacquire`` seconds is re-admitted (RECOVERING) -- unless a *witness* refutes it: another
+  channel of the same state whose sample passes the gate and disagrees with this one beyond the
+  gate (chi-square on the difference, R_i + R_j). The model is then corroborated by an
+  independent sensor precise enough to tell, and the disagreeing sensor stays out (an offset
+  sensor). A witness too imprecise to separate the two samples says nothing. Without a
+  witness, disagreeing that long points to a diverged estimate rather than to an outlier, and
+  dead reckoning forever is the worse failure. 0 disables this.
 
 **Recovery** (a LOST channel whose sample is accepted): the correction is spread evenly over
 the next N = ``CFG_RAMP_N`` samples by under-weighting (Lear's underweighting; Zanetti, DeMars &
@@ -60,8 +78,8 @@ update uses the nominal R_j in the Joseph form, which is exact for any gain, so 
 honest covariance of the under-weighted estimate (it shrinks as the error does) and the next
 sample's s reflects what is left. After N samples the channel is OK again. N = 0
 (``recovery_time_s = 0``) returns abruptly, as the thesis did.
-A returning sample is gated with the S it would be used with (s / g_1 + R_j), except after a
-loss by the gate, where the nominal S must be met.
+Every sample, returning or not, is gated with the filter's honest S = s + R_j: the
+under-weighting changes the gain, not what the filter believes.
 
 **Manual override** (``ch[j, CH_MODE]``): MODE_OFF forces the channel off (status OFF, samples
 ignored); releasing it to MODE_AUTO returns through the recovery path; MODE_ON uses every finite
@@ -82,12 +100,14 @@ Layouts (module constants, usable inside numba code):
   CH_LAST_T (time of the last finite sample; NaN = none yet, set to the first step's time),
   CH_RAMP_T0 (time of the return), CH_FAIL_T0 (time of the first failure of the current run),
   CH_T0 (time of the first step: start of the start-up phase), CH_RAMP_K (samples used since
-  the return), CH_CONFIRM_T (last time a sample passed the gate on its own), CH_STUCK (1 while
+  the return), CH_STUCK (1 while
   the last block was stuck), CH_BLK_N, CH_BLK_Y0, CH_BLK_S1, CH_BLK_S2 (the current block:
-  count, first value, sum and sum of squares of the deviations from it).
+  count, first value, sum and sum of squares of the deviations from it), CH_PREV_NU, CH_PREV_S
+  (innovation and its variance of the last sample that failed the gate).
 * ``rep[j, :]`` (float64, m x N_REP, per-step report): REP_EVENT (EVENT_*), REP_INNOV
-  (prior innovation, NaN without a usable sample), REP_S (its variance h P^- h^T + R_eff),
-  REP_R (R_eff used or that would be used).
+  (prior innovation, NaN without a usable sample), REP_S (its variance h P^- h^T + R_j, what
+  the gate tests), REP_R (the variance the sample is weighted with: R_j, or R_eff while
+  recovering).
 
 For logs, :func:`status_code` folds status and reason into one small integer whose label is
 ``STATUS_CODE_LABELS[code]`` (0-3 are the STATUS_* codes themselves, so a log of plain statuses
@@ -106,9 +126,9 @@ CFG_OFFSET, CFG_R, CFG_TIMEOUT, CFG_GATE, CFG_LOSE_AFTER, CFG_RAMP_TIME, CFG_RAM
     CFG_REACQUIRE, CFG_STATE, CFG_STARTUP, CFG_STUCK_N, CFG_STUCK_BOUND = range(13)
 N_CFG = 13
 # channel state columns
-CH_STATUS, CH_REASON, CH_MODE, CH_FAILS, CH_LAST_T, CH_RAMP_T0, CH_FAIL_T0, CH_T0, CH_RAMP_K, CH_CONFIRM_T, \
-    CH_STUCK, CH_BLK_N, CH_BLK_Y0, CH_BLK_S1, CH_BLK_S2 = range(15)
-N_CH = 15
+CH_STATUS, CH_REASON, CH_MODE, CH_FAILS, CH_LAST_T, CH_RAMP_T0, CH_FAIL_T0, CH_T0, CH_RAMP_K, CH_STUCK, \
+    CH_BLK_N, CH_BLK_Y0, CH_BLK_S1, CH_BLK_S2, CH_PREV_NU, CH_PREV_S = range(16)
+N_CH = 16
 # report columns
 REP_EVENT, REP_INNOV, REP_S, REP_R = range(4)
 N_REP = 4
@@ -150,7 +170,7 @@ def status_code(status, reason) -> int:
 def new_channel_state(m: int) -> np.ndarray:
     """Initial management state of m channels: OK, automatic, no sample seen yet."""
     ch = np.zeros((m, N_CH))
-    for col in (CH_LAST_T, CH_RAMP_T0, CH_FAIL_T0, CH_T0, CH_CONFIRM_T):
+    for col in (CH_LAST_T, CH_RAMP_T0, CH_FAIL_T0, CH_T0):
         ch[:, col] = np.nan
     return ch
 
@@ -215,14 +235,23 @@ def _agrees_with_another(rep, cfg, value, j, m):
 
 
 @njit(cache=True)
-def _witnessed(ch, cfg, j, m, t):
-    """Another channel of the same state passed the gate on its own within its timeout: the
-    prediction is corroborated by an independent sensor."""
+def _witnessed(rep, cfg, value, j, m):
+    """Another channel of the same state refutes channel j's sample at this step: its own sample
+    passes the gate (it agrees with the prediction) and disagrees with channel j's beyond the gate
+    (chi-square on the difference, variance R_i + R_j). A witness too imprecise to tell the two
+    apart (the pressure sensor against a millimetre of Qualisys disagreement) says nothing."""
     k = int(cfg[j, CFG_STATE])
-    if k < 0:
+    if k < 0 or math.isnan(value[j]):
         return False
     for i in range(m):
-        if i != j and int(cfg[i, CFG_STATE]) == k and t - ch[i, CH_CONFIRM_T] <= cfg[i, CFG_TIMEOUT]:
+        if i == j or int(cfg[i, CFG_STATE]) != k or math.isnan(value[i]) or math.isnan(rep[i, REP_INNOV]):
+            continue
+        if _fails_prior(rep, cfg, i):
+            continue
+        d = value[j] - value[i]
+        if cfg[j, CFG_ANGLE] != 0.0:
+            d = wrap_angle(d)
+        if d * d > cfg[j, CFG_GATE] * (cfg[j, CFG_R] + cfg[i, CFG_R]):
             return True
     return False
 
@@ -253,6 +282,37 @@ def _stuck_check(ch, cfg, j, v):
     s1 = ch[j, CH_BLK_S1]
     scatter = ch[j, CH_BLK_S2] - s1 * s1 / nb  # sum of squared deviations from the block mean
     return 1 if scatter < cfg[j, CFG_STUCK_BOUND] * cfg[j, CFG_R] else 0
+
+
+@njit(cache=True)
+def _inflate(P, H, cfg, j, nu, s):
+    """The prediction of channel j's quantity was found wrong (a jump the model missed): widen its
+    variance so that this innovation is a 1-sigma event, h P h^T + R = nu^2. For a unit row h = e_i
+    the jump is added to P_ii alone (a jump of that state, uncorrelated with the others: the
+    velocity and bias estimates are not dragged along); for a general row the covariance of the
+    correlated states is scaled (fading memory, P <- D P D). Both keep P positive semi-definite.
+    Returns the new h P h^T + R."""
+    r = cfg[j, CFG_R]
+    hph = s - r
+    extra = nu * nu - s
+    if not (hph > 0.0 and extra > 0.0):
+        return s
+    idx = int(cfg[j, CFG_STATE])
+    if idx >= 0:
+        P[idx, idx] += extra
+        return nu * nu
+    n = P.shape[0]
+    f = math.sqrt((nu * nu - r) / hph)
+    for i in range(n):
+        pi = 0.0
+        for k in range(n):
+            pi += P[i, k] * H[j, k]
+        if pi == 0.0:
+            continue  # uncorrelated with the measurement: untouched
+        for k in range(n):
+            P[i, k] *= f
+            P[k, i] *= f
+    return nu * nu
 
 
 @njit(cache=True, inline="always")
@@ -358,13 +418,13 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
                 fails = 0
         elif stuck >= 0:
             ch[j, CH_STUCK] = 0.0
-        # the variance this sample would be used with: under-weighted while recovering
+        # the variance this sample would be weighted with: under-weighted while recovering; the
+        # gate tests it against the filter's honest S (P stays honest under the under-weighting)
         g = _weight(ch, cfg, j, status)
         r_eff = r_nom + hph * (1.0 / g - 1.0) if g < 1.0 else r_nom
         rep[j, REP_R] = r_eff
         rep[j, REP_INNOV] = nu
-        # a channel lost by the gate must meet the nominal gate to return
-        rep[j, REP_S] = hph + (r_nom if status == STATUS_LOST and reason == REASON_GATE else r_eff)
+        rep[j, REP_S] = hph + r_nom
         ch[j, CH_STATUS] = status
         ch[j, CH_REASON] = reason
         ch[j, CH_FAILS] = fails
@@ -385,15 +445,30 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
         gated = t - ch[j, CH_T0] >= cfg[j, CFG_STARTUP]  # the start-up phase is over
         own = not _fails_prior(rep, cfg, j)
         passed = mode == MODE_ON or not gated or own
-        if own and gated and status != STATUS_LOST:
-            ch[j, CH_CONFIRM_T] = t  # this sensor corroborates the prediction
         if (not passed and status == STATUS_LOST and reason == REASON_GATE and fails > 0
                 and cfg[j, CFG_REACQUIRE] > 0.0 and t - ch[j, CH_FAIL_T0] >= cfg[j, CFG_REACQUIRE]
-                and not _witnessed(ch, cfg, j, m, t)):
-            passed = True  # re-acquisition: it has disagreed too long to be an outlier, and no other sensor says otherwise
+                and not _witnessed(rep, cfg, value, j, m)):
+            passed = True  # re-acquisition: disagreeing too long for an outlier, and no witness against it
         if not passed and _agrees_with_another(rep, cfg, value, j, m):
             passed = True  # the sensors agree with each other, not with the prediction: the model is off
+        persists = False
+        if not passed and gated and fails > 0 and not _witnessed(rep, cfg, value, j, m):
+            # persistence: the previous sample failed the gate too, and by the same amount within the
+            # gate. An outlier is isolated; a deviation that persists is a change the model missed
+            # (or an offset that, with no other sensor of this state, nothing can tell from one)
+            d = rep[j, REP_INNOV] - ch[j, CH_PREV_NU]
+            if cfg[j, CFG_ANGLE] != 0.0:
+                d = wrap_angle(d)
+            if d * d <= cfg[j, CFG_GATE] * (rep[j, REP_S] + ch[j, CH_PREV_S]):
+                passed = True
+                persists = True
+                # the prediction is what was wrong: its covariance was too small (fading memory)
+                rep[j, REP_S] = _inflate(P, H, cfg, j, rep[j, REP_INNOV], rep[j, REP_S])
         if passed:
+            if persists and status == STATUS_RECOVERING:
+                # the widened variance makes the under-weighting relative to it: keep the weight
+                rep[j, REP_R] = cfg[j, CFG_R] + (rep[j, REP_S] - cfg[j, CFG_R]) * (
+                    max(cfg[j, CFG_RAMP_N] - ch[j, CH_RAMP_K], 1.0) - 1.0)
             if status == STATUS_LOST:
                 if cfg[j, CFG_RAMP_N] >= 1.0:
                     status = STATUS_RECOVERING
@@ -411,6 +486,8 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
             if fails == 0:
                 ch[j, CH_FAIL_T0] = t
             fails += 1
+            ch[j, CH_PREV_NU] = rep[j, REP_INNOV]
+            ch[j, CH_PREV_S] = rep[j, REP_S]
             if status != STATUS_LOST and fails >= cfg[j, CFG_LOSE_AFTER]:
                 status = STATUS_LOST
                 reason = REASON_GATE

@@ -299,9 +299,19 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
     observable, touched, V = observability(A, H)
     if not observable and require_observable:
         raise ConfigError([unobservable_problem(file, channels, touched, V)], "filter configuration")
-    if any(math.isnan(c.startup_s) for c in channels):
-        auto = startup_time(disc.Phi, disc.Q, H, R, config.P0, config.sample_time) if observable else 0.0
-        channels = [replace(c, startup_s=auto) if math.isnan(c.startup_s) else c for c in channels]
+    # The gate is only valid once the filter has converged: a shorter start-up phase than the
+    # design needs lets it discard healthy sensors while the filter is the one that is wrong (with
+    # the thesis's P0 = 0 and startup_s = 0 the closed loop lost both depth sensors and diverged).
+    auto = startup_time(disc.Phi, disc.Q, H, R, config.P0, config.sample_time) if observable else 0.0
+    for c, mc in zip(channels, config.measurements):
+        if not math.isnan(c.startup_s) and c.startup_s < auto and np.isfinite(c.gate_threshold):
+            problems.append(Problem(file, f"fusion.startup_s ({mc.key})", c.startup_s,
+                                    f"at least {auto:.3g} s for {c.name}: the start-up phase this design needs "
+                                    "before its innovation gate is valid (P converged from P0 plus 5 time constants "
+                                    "of the error dynamics); leave it out to use that value"))
+    if problems:
+        raise ConfigError(problems, "filter configuration")
+    channels = [replace(c, startup_s=auto) if math.isnan(c.startup_s) else c for c in channels]
     return FilterModel(
         h=config.sample_time, params=params, T_w=T_w, T_r=T_r, A=A, B=B, E=E, W=W, Phi=disc.Phi,
         Delta=disc.Delta, Gamma=disc.Gamma, Q=disc.Q, channels=tuple(channels), H=H, R=R,
