@@ -12,7 +12,7 @@ Recursion (SPEC section 5; Brown & Hwang 2012, ch. 4), at sample k:
 all samples of a step equals the same update done one channel at a time (Bierman 1977, ch. II;
 Brown & Hwang 2012, sec. 4.3) -- exact in exact arithmetic, and checked against filterpy's
 stacked update to 1e-9 in the tests. Scalar updates need no matrix inverse (one division per
-channel), make gating, drop-out and the transitional variance per channel natural (a channel is
+channel), make gating, drop-out and the recovery weighting per channel natural (a channel is
 simply skipped or weighted), and cost O(n^2) per channel. Each scalar update is the **Joseph
 form** P+ = (I - k h^T) P (I - k h^T)^T + r k k^T, evaluated as two rank-one products
 (M = P - k (P h)^T, then P+ = M + (r k - M h) k^T), which keeps P positive semi-definite even
