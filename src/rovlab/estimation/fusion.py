@@ -23,7 +23,7 @@ Checks that do not involve the filter (a sensor fault whatever the filter believ
 Checks against the prediction:
 
 * **innovation gate**: with the prior x^-, P^- of this sample, nu = y - offset - h x^- (wrapped
-  to (-pi, pi] for angle channels) and S = h P^- h^T + R_eff; the sample passes when
+  to (-pi, pi] for angle channels) and S = h P^- h^T + R_j; the sample passes when
   nu^2 / S <= chi2_{1}(p) (``CFG_GATE``; infinite = no gate). A failing sample is not used
   (event REJECTED); ``lose_after`` consecutive failures declare the channel LOST (reason GATE).
   Gating is done against the prior of the whole sample, so its outcome does not depend on the
@@ -41,20 +41,17 @@ Checks against the prediction:
   do not overrule the model.
 * **persistence**: a sample that fails the gate right after a sample of the same channel that
   failed it too, by the same amount (chi-square on the difference of the two innovations), is
-  used -- unless a witness (below) refutes it. The prediction
-  was then overconfident: the variance of the measured state is widened so that this
-  innovation is a 1-sigma event (a covariance reset of that state, as navigation filters do
-  when a measurement has been rejected too long; the adaptive fading filter of Xia et al. 1994
-  scales P by an innovation-driven factor instead, which here would claim the velocity and
-  bias are as wrong as the heading). An outlier is
-  isolated; a deviation that persists is a change the model missed (a rare large process-noise
-  event, an unmodelled force), and rejecting it makes the filter dead-reckon further away from
-  the truth with every sample. With no witness, a sensor offset cannot be told from that, and
-  the sensor is followed (as it would be after ``reacquire`` seconds anyway). The widened
-  variance is the measured state's alone, so the update moves that state to the sample without
-  dragging the velocity and bias estimates along through P's correlations (their gains shrink
-  as S grows); spreading the correction instead (the recovery ramp) was tried and let the
-  estimate fall behind a real change of the truth.
+  used -- unless a witness (below) refutes it. An outlier is isolated; a deviation that persists
+  is a change the model missed (a rare large process-noise event, an unmodelled force), and
+  rejecting it makes the filter dead-reckon further from the truth with every sample. The
+  prediction was then overconfident: the variance of the measured state alone is widened so
+  that this innovation is a 1-sigma event (a covariance reset of that state), and the update
+  moves that state to the sample without dragging the velocity and bias estimates along through
+  P's correlations (their gains shrink as S grows). Scaling all of P instead (the adaptive
+  fading filter of Xia et al. 1994) claims the rates and biases are as wrong as the measured
+  state and kicked r_hat to several rad/s; spreading the change over the recovery ramp let the
+  estimate fall behind a real change of the truth. With no witness a sensor offset cannot be
+  told from such a change, and the sensor is followed (as after ``reacquire`` seconds anyway).
 * **re-acquisition**: a channel lost by the gate whose samples keep failing it for
   ``reacquire`` seconds is re-admitted (RECOVERING) -- unless a *witness* refutes it: another
   channel of the same state whose sample passes the gate and disagrees with this one beyond the
