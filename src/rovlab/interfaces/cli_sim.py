@@ -59,6 +59,12 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from rovlab.sim.scenario import load_scenario_data
 
     _check_counts(args)
+    if args.backend == "dask":
+        from rovlab.interfaces.cli import UserError
+        from rovlab.sim.montecarlo import dask_available
+
+        if not dask_available():  # say so before anything runs or is written
+            raise UserError("--backend dask needs Dask: pip install 'rovlab[dask]' (or use --backend processes)")
     data, file = load_scenario_data(args.scenario)
     name = str(data.get("name") or Path(file).stem)
     out = Path(args.out or Path("out") / name)

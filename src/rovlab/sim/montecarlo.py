@@ -88,23 +88,50 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     return [results[s] for s in seeds]
 
 
+def dask_available() -> bool:
+    """Whether the Dask backend can run here (the optional extra rovlab[dask])."""
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def _run_dask(data, file, seeds, scheduler, progress):
+    """Runs as Dask tasks, in chunks like the process pool: on the scheduler at ``scheduler``
+    (e.g. tcp://host:8786) or on a local cluster of one single-threaded worker process per core."""
+    if not dask_available():
+        raise RuntimeError("the Dask backend needs dask[distributed]: pip install 'rovlab[dask]'")
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler:
+        client = Client(scheduler, timeout="30s")
+    else:
+        cluster = LocalCluster(n_workers=os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None)
+        client = Client(cluster)
+    n = len(seeds)
+    out: dict[int, dict[str, Any]] = {}
     try:
-        from dask.distributed import Client, as_completed
-    except ImportError as exc:  # pragma: no cover - optional extra
-        raise RuntimeError("the Dask backend needs dask[distributed]: pip install 'rovlab[dask]'") from exc
-    client = Client(scheduler) if scheduler else Client(processes=True)
-    try:
-        futures = [client.submit(_one_run, data, file, s, pure=False) for s in seeds]
-        out = {}
-        for i, fut in enumerate(as_completed(futures)):
-            r = fut.result()
-            out[r["seed"]] = r
-            if progress:
-                progress(i + 1, len(seeds))
-        return [out[s] for s in seeds]
+        workers = max(1, len(client.scheduler_info().get("workers", {})))
+        size = max(1, min(50, n // (workers * 4) or 1))
+        chunks = [seeds[i:i + size] for i in range(0, n, size)]
+        futures = [client.submit(_chunk, data, file, c, pure=False) for c in chunks]
+        try:
+            for fut in as_completed(futures):
+                for r in fut.result():
+                    out[r["seed"]] = r
+                if progress:
+                    progress(len(out), n)
+        except KeyboardInterrupt:
+            client.cancel(futures)
+            print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
+        return [out[s] for s in seeds if s in out]
     finally:
         client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
