@@ -1,0 +1,116 @@
+"""Priority allocation is the exact lexicographic optimum (issue 11, item 3).
+
+The reference is an independent formulation solved by scipy's HiGHS LP solver, level by level:
+variables [f (n thrusters), alpha_l (one per demanded level)], equalities B f = sum_l alpha_l tau_l
+(so every DOF demanded zero, K and M included, is kept at zero), bounds f_min <= f <= f_max and
+0 <= alpha_l <= 1; maximise alpha_0, fix it, maximise alpha_1, ... (the definition of a
+lexicographic optimum, e.g. Johansen & Fossen 2013, Automatica 49(5), sec. 4.2 on prioritised
+allocation). The kernel's fractions must equal the LP's on thousands of random saturating demands
+(fixed seed) for both packaged vehicles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+from rovlab.allocation import DEFAULT_PRIORITY, SCALE_ALL, Allocator
+from rovlab.params.vehicle import WRENCH6
+
+SEED = 11_3  # issue 11, item 3
+FRACTION_TOL = 1e-6  # HiGHS's own primal/dual feasibility tolerance is 1e-7
+LIMIT_TOL = 1e-9  # [N]
+
+
+def lexicographic_lp(alloc: Allocator, tau6: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(alpha per level, forces) of the lexicographic LP, computed with scipy.optimize.linprog."""
+    B, n = alloc.B, alloc.B.shape[1]
+    levels = [lv for lv in range(alloc.n_levels) if np.any(tau6[alloc.level == lv] != 0.0)]
+    cols = []
+    for lv in levels:
+        t = np.where(alloc.level == lv, tau6, 0.0)
+        cols.append(-t)
+    A_eq = np.hstack([B, np.array(cols).T])
+    bounds = list(zip(alloc.f_min, alloc.f_max)) + [(0.0, 1.0)] * len(levels)
+    x = None
+    for k in range(len(levels)):
+        c = np.zeros(n + len(levels))
+        c[n + k] = -1.0
+        res = linprog(c, A_eq=A_eq, b_eq=np.zeros(6), bounds=bounds, method="highs")
+        assert res.status == 0, res.message
+        x = res.x
+        a = float(np.clip(x[n + k], 0.0, 1.0))
+        bounds[n + k] = (a, a)  # fix this level at its optimum for the levels below
+    alpha = np.ones(alloc.n_levels)
+    for k, lv in enumerate(levels):
+        alpha[lv] = bounds[n + k][0]
+    return alpha, (x[:n] if x is not None else np.zeros(n))
+
+
+def _random_demands(rng, count, scale, with_km):
+    """4-DOF demands [X, Y, Z, N] (K = M = 0), some with roll/pitch moments too; heavy-tailed
+    sizes so most saturate and some levels are feasible on their own."""
+    tau = rng.normal(size=(count, 6)) * scale * rng.uniform(0.3, 2.0, size=(count, 1))
+    if not with_km:
+        tau[:, 3:5] = 0.0
+    else:
+        tau[rng.uniform(size=count) < 0.6, 3:5] = 0.0
+    # sometimes drop a DOF entirely (a level with nothing demanded, or a partly demanded level)
+    tau[rng.uniform(size=(count, 6)) < 0.1] = 0.0
+    return tau
+
+
+CASES = {
+    # (vehicle fixture, demand scale per DOF [N, N, N, N m, N m, N m])
+    "udrone": np.array([60.0, 60.0, 80.0, 3.0, 3.0, 6.0]),
+    "heavy": np.array([200.0, 200.0, 250.0, 20.0, 20.0, 30.0]),
+}
+
+
+def _check_against_lp(alloc, demands):
+    checked = 0
+    worst = 0.0
+    for tau in demands:
+        f, frac = alloc.forces(tau)
+        alpha_lp, f_lp = lexicographic_lp(alloc, tau)
+        if np.all(alpha_lp >= 1.0 - 1e-9):
+            continue  # feasible demand: covered by test_feasible_demand_is_met_exactly
+        checked += 1
+        expected = np.where(tau != 0.0, alpha_lp[alloc.level], 1.0)
+        worst = max(worst, float(np.max(np.abs(frac - expected))))
+        np.testing.assert_allclose(frac, expected, atol=FRACTION_TOL,
+                                   err_msg=f"demand {tau.tolist()}: fractions differ from the LP's")
+        assert np.all(f <= alloc.f_max + LIMIT_TOL) and np.all(f >= alloc.f_min - LIMIT_TOL)
+        # the wrench is exactly the demanded one scaled per level: zero rows stay zero (K = M = 0),
+        # nothing bends
+        np.testing.assert_allclose(alloc.B @ f, frac * tau, atol=1e-9, rtol=0)
+        # the least weighted effort among optimal force vectors (weights are 1 here): no more
+        # than the LP's (arbitrary) optimal vertex
+        assert f @ f <= f_lp @ f_lp + 1e-6
+    return checked, worst
+
+
+@pytest.mark.parametrize("vehicle_name", ["udrone", "heavy"])
+def test_priority_is_the_lexicographic_lp_optimum(vehicle_name, request):
+    alloc = Allocator(request.getfixturevalue(vehicle_name))
+    rng = np.random.default_rng(SEED)
+    demands = _random_demands(rng, 2000, CASES[vehicle_name], with_km=True)
+    checked, worst = _check_against_lp(alloc, demands)
+    assert checked > 1000, f"only {checked} of the random demands saturated"
+
+
+@pytest.mark.parametrize("vehicle_name", ["udrone", "heavy"])
+@pytest.mark.parametrize("priority", [SCALE_ALL, (("X", "Y"), ("N",), ("Z",)), (("N",), ("Z",), ("Y",), ("X",))],
+                         ids=["scale", "xy-n-z", "n-z-y-x"])
+def test_other_priorities_are_lexicographic_too(vehicle_name, priority, request):
+    alloc = Allocator(request.getfixturevalue(vehicle_name), priority=priority)
+    rng = np.random.default_rng(SEED + 1)
+    checked, _ = _check_against_lp(alloc, _random_demands(rng, 300, CASES[vehicle_name], with_km=False))
+    assert checked > 150
+
+
+def test_default_priority_is_documented_order():
+    # the order the README and the CLI help state
+    assert DEFAULT_PRIORITY == (("K", "M"), ("Z",), ("N",), ("X", "Y"))
+    assert set(sum(DEFAULT_PRIORITY, ())) == set(WRENCH6)
