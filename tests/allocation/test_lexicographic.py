@@ -114,3 +114,54 @@ def test_default_priority_is_documented_order():
     # the order the README and the CLI help state
     assert DEFAULT_PRIORITY == (("K", "M"), ("Z",), ("N",), ("X", "Y"))
     assert set(sum(DEFAULT_PRIORITY, ())) == set(WRENCH6)
+
+
+def _is_least_effort(alloc, f, weights, tol=1e-7):
+    """KKT certificate that f minimises f^T W f over {B f = B f, f_min <= f <= f_max}: a
+    multiplier nu exists with (W f - B^T nu)_i = 0 for thrusters inside their limits, >= 0 at
+    the lower limit and <= 0 at the upper one (found, or shown not to exist, by an LP)."""
+    B = alloc.B
+    g = weights * f
+    at_lo = f <= alloc.f_min + 1e-9
+    at_hi = f >= alloc.f_max - 1e-9
+    free = ~(at_lo | at_hi)
+    scale = 1.0 + np.max(np.abs(g))
+    A_ub = np.vstack([B.T[free], -B.T[free], B.T[at_lo], -B.T[at_hi]])
+    b_ub = np.concatenate([g[free] + tol * scale, -g[free] + tol * scale, g[at_lo] + tol * scale,
+                           -g[at_hi] + tol * scale])
+    res = linprog(np.zeros(6), A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * 6, method="highs")
+    return res.status == 0
+
+
+def test_redundant_vehicle_uses_least_weighted_effort(heavy):
+    """BlueROV2 Heavy (8 thrusters, 2-dimensional null space): whether the demand is met or
+    scaled, the forces are the least weighted effort giving the allocated wrench within the
+    limits - also when the plain weighted pseudo-inverse would exceed a limit."""
+    rng = np.random.default_rng(SEED + 2)
+    weights = rng.uniform(0.5, 3.0, 8)
+    alloc = Allocator(heavy, weights=weights)
+    counts = {"met, pseudo-inverse outside limits": 0, "saturated": 0}
+    for tau in _random_demands(rng, 600, 0.4 * CASES["heavy"], with_km=False):
+        f, frac = alloc.forces(tau)
+        assert np.all(f <= alloc.f_max + LIMIT_TOL) and np.all(f >= alloc.f_min - LIMIT_TOL)
+        np.testing.assert_allclose(alloc.B @ f, frac * tau, atol=1e-9, rtol=0)
+        plain = alloc.T @ tau
+        if np.all(frac == 1.0):
+            if np.all(plain <= alloc.f_max) and np.all(plain >= alloc.f_min):
+                np.testing.assert_allclose(f, plain, atol=1e-12)  # as before: the pseudo-inverse
+                continue
+            counts["met, pseudo-inverse outside limits"] += 1
+        else:
+            counts["saturated"] += 1
+        assert _is_least_effort(alloc, f, weights), f"demand {tau.tolist()}: not the least effort"
+    assert min(counts.values()) > 20, counts
+
+
+def test_least_effort_certificate_can_fail(heavy):
+    # the check above rejects a feasible but wasteful force vector (a null-space step added)
+    alloc = Allocator(heavy)
+    tau = np.array([20.0, 0, 10.0, 0, 0, 0])
+    f, _ = alloc.forces(tau)
+    _, _, Vt = np.linalg.svd(alloc.B)
+    assert _is_least_effort(alloc, f, np.ones(8))
+    assert not _is_least_effort(alloc, f + 2.0 * Vt[6], np.ones(8))

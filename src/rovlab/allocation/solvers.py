@@ -77,8 +77,9 @@ class AllocationResult:
     demanded: np.ndarray  # 6-DOF wrench asked for [X, Y, Z, K, M, N]
     achieved: np.ndarray  # 6-DOF wrench the forces produce
     fraction: np.ndarray  # per DOF: achieved share of the demand (1 = met)
-    saturated: bool  # some DOF could not be met in full
+    saturated: bool  # some DOF could not be met in full (unconstrained: some force is beyond its limits)
     thruster_names: tuple[str, ...]
+    over_limit: tuple[str, ...] = ()  # unconstrained only: thrusters whose force is beyond their limits
 
     def limited_dofs(self) -> list[str]:
         return [name for name, fr in zip(WRENCH6, self.fraction) if fr < 1.0 - 1e-6]
@@ -93,6 +94,7 @@ class AllocationResult:
             "fraction": self.fraction.tolist(),
             "saturated": bool(self.saturated),
             "limited_dofs": self.limited_dofs(),
+            "over_limit": list(self.over_limit),
         }
 
 
@@ -101,7 +103,9 @@ class Allocator:
 
     ``priority`` lists DOF groups from most to least important (a DOF not listed goes last);
     ``SCALE_ALL`` keeps the whole wrench direction instead. ``saturation=False`` gives the
-    plain unconstrained pseudo-inverse (forces may exceed the limits; PWM is then saturated).
+    plain unconstrained pseudo-inverse: the forces are T tau as they are, possibly beyond the
+    thrusters' limits (listed in ``over_limit``; their PWM commands saturate, so the real
+    wrench then differs from ``achieved``, which is what the unconstrained forces would give).
     """
 
     def __init__(self, vehicle: Vehicle, *, priority: Sequence[Sequence[str]] = DEFAULT_PRIORITY,
@@ -138,15 +142,14 @@ class Allocator:
         tau6 = as_wrench6(tau)
         f, frac = self.forces(tau6)
         pwm = bank_pwm(self.bank.rows, self.bank.grid_pwm, self.bank.grid_force, f)
+        achieved = self.B @ f
         if not self.saturation:
-            f_real = np.clip(f, self.bank.f_min, self.bank.f_max)
-            achieved = self.B @ f_real
-            sat = bool(np.any(f > self.bank.f_max + 1e-9) or np.any(f < self.bank.f_min - 1e-9))
+            over = (f > self.bank.f_max + 1e-9) | (f < self.bank.f_min - 1e-9)
+            names = tuple(name for name, o in zip(self.bank.names, over) if o)
+            # a rank-deficient B gives the least-squares wrench: report its share per DOF
             frac = np.array([a / d if abs(d) > 1e-12 else 1.0 for a, d in zip(achieved, tau6)])
-            f = f_real
-        else:
-            achieved = self.B @ f
-            sat = bool(np.any(frac < 1.0 - 1e-9))
+            return AllocationResult(f, pwm, tau6, achieved, frac, bool(over.any()), self.bank.names, names)
+        sat = bool(np.any(frac < 1.0 - 1e-9))
         return AllocationResult(f, pwm, tau6, achieved, frac, sat, self.bank.names)
 
 
