@@ -165,3 +165,35 @@ def test_least_effort_certificate_can_fail(heavy):
     _, _, Vt = np.linalg.svd(alloc.B)
     assert _is_least_effort(alloc, f, np.ones(8))
     assert not _is_least_effort(alloc, f + 2.0 * Vt[6], np.ones(8))
+
+
+def test_rank_deficient_thruster_set_scales_the_least_squares_wrench(heavy):
+    """Five of the Heavy's thrusters (B of rank 4, so not every wrench can be made): each level's
+    pseudo-inverse (least-squares) wrench P tau_l, P = B T, is scaled lexicographically, as the
+    same LP with P tau_l in place of tau_l says."""
+    from rovlab.allocation import weighted_pinv
+    from rovlab.allocation.solvers import allocate_kernel
+
+    full = Allocator(heavy)
+    cols = [0, 1, 2, 3, 4]
+    B = np.ascontiguousarray(full.B[:, cols])
+    T = np.ascontiguousarray(weighted_pinv(B))
+    f_min, f_max = full.f_min[cols].copy(), full.f_max[cols].copy()
+    assert np.linalg.matrix_rank(B) == 4
+    P = B @ T
+    rng = np.random.default_rng(SEED + 3)
+    checked = 0
+    for tau in _random_demands(rng, 300, CASES["heavy"], with_km=False):
+        f, frac = allocate_kernel(B, T, np.ones(5), f_min, f_max, tau, full.level, full.n_levels, True)
+        assert np.all(f <= f_max + LIMIT_TOL) and np.all(f >= f_min - LIMIT_TOL)
+        levels = [lv for lv in range(full.n_levels) if np.any(tau[full.level == lv] != 0.0)]
+        A_eq = np.hstack([B, -np.array([P @ np.where(full.level == lv, tau, 0.0) for lv in levels]).T])
+        bounds = list(zip(f_min, f_max)) + [(0.0, 1.0)] * len(levels)
+        for k, lv in enumerate(levels):
+            c = np.zeros(5 + len(levels))
+            c[5 + k] = -1.0
+            a = float(np.clip(linprog(c, A_eq=A_eq, b_eq=np.zeros(6), bounds=bounds, method="highs").x[5 + k], 0, 1))
+            bounds[5 + k] = (a, a)
+            assert frac[full.level == lv][tau[full.level == lv] != 0] == pytest.approx(a, abs=FRACTION_TOL)
+        checked += any(b[0] < 1.0 - 1e-9 for b in bounds[5:])
+    assert checked > 100
