@@ -27,6 +27,8 @@ def lexicographic_lp(alloc: Allocator, tau6: np.ndarray) -> tuple[np.ndarray, np
     """(alpha per level, forces) of the lexicographic LP, computed with scipy.optimize.linprog."""
     B, n = alloc.B, alloc.B.shape[1]
     levels = [lv for lv in range(alloc.n_levels) if np.any(tau6[alloc.level == lv] != 0.0)]
+    if not levels:
+        return np.ones(alloc.n_levels), np.zeros(n)
     cols = []
     for lv in levels:
         t = np.where(alloc.level == lv, tau6, 0.0)

@@ -2,16 +2,16 @@
 
 * Unconstrained: the weighted pseudo-inverse T = W^-1/2 pinv(B W^-1/2) (for a square,
   invertible B this is B^-1, so a 4-DOF demand is met exactly with K = M = 0; Fossen 2011,
-  sec. 12.3.2).
-* Saturation-aware (the default): the demand is split into priority levels (DOF groups).
-  Level by level, the largest fraction alpha in [0, 1] of that level's wrench that keeps every
-  thruster within its own asymmetric limits [f_min_i, f_max_i] is added, so a level that
-  cannot be met is *scaled* along its own direction and never bent; lower levels get what is
-  left. With one level holding all DOFs this is direction-preserving scaling of the whole
-  wrench. For redundant thruster sets, thrusters that hit a limit are frozen there and the rest
-  of the level is redistributed over the free ones while they still span the wrench space
-  (redistributed pseudo-inverse, Bodson 2002, J. Guid. Control Dyn. 25(4)).
-  No thruster force is ever clipped on its own.
+  sec. 12.3.2). The forces may exceed the thrusters' limits; the result says which do.
+* Saturation-aware (the default): the demand is split into priority levels (DOF groups) and
+  each level is scaled along its own direction by a fraction alpha in [0, 1]: the highest level
+  gets the largest fraction any force vector within the asymmetric limits [f_min_i, f_max_i] can
+  give, the next the largest with that one held, and so on (the exact lexicographic optimum,
+  solved by small compiled LPs in rovlab.allocation.lexicographic). DOFs demanded zero stay zero,
+  nothing is bent, a feasible demand is met exactly, and among the force vectors giving the
+  optimal wrench the least weighted effort f^T W f is used (redundant sets use their null
+  space). With one level holding all DOFs this is direction-preserving scaling of the whole
+  wrench. No thruster force is ever clipped on its own.
 """
 
 from __future__ import annotations
@@ -39,18 +39,6 @@ def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarra
         raise ValueError(f"thruster weights must be {n} positive numbers, got {w.tolist()}")
     s = 1.0 / np.sqrt(w)
     return s[:, None] * np.linalg.pinv(B * s[None, :])
-
-
-@njit(cache=True)
-def matvec(A: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """A @ v as a plain loop: for these 6 x n matrices a BLAS call costs more than the sums."""
-    out = np.zeros(A.shape[0])
-    for i in range(A.shape[0]):
-        acc = 0.0
-        for j in range(A.shape[1]):
-            acc += A[i, j] * v[j]
-        out[i] = acc
-    return out
 
 
 @njit(cache=True)
