@@ -4,8 +4,8 @@ The reference is an independent formulation solved by scipy's HiGHS LP solver, l
 variables [f (n thrusters), alpha_l (one per demanded level)], equalities B f = sum_l alpha_l tau_l
 (so every DOF demanded zero, K and M included, is kept at zero), bounds f_min <= f <= f_max and
 0 <= alpha_l <= 1; maximise alpha_0, fix it, maximise alpha_1, ... (the definition of a
-lexicographic optimum, e.g. Johansen & Fossen 2013, Automatica 49(5), sec. 4.2 on prioritised
-allocation). The kernel's fractions must equal the LP's on thousands of random saturating demands
+lexicographic optimum; prioritised allocation as surveyed by Johansen & Fossen 2013, "Control
+allocation - a survey", Automatica 49(5), 1087-1103). The kernel's fractions must equal the LP's on thousands of random saturating demands
 (fixed seed) for both packaged vehicles.
 """
 

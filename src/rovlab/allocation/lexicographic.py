@@ -8,7 +8,7 @@ alpha_l in [0, 1] and thruster forces f with
 
 that maximise alpha_0, then alpha_1 with alpha_0 held at its optimum, and so on: the
 lexicographic optimum of prioritised allocation (Johansen & Fossen 2013, "Control allocation -
-a survey", Automatica 49(5), sec. 4; the LP form of direction-preserving allocation is Bodson
+a survey", Automatica 49(5), 1087-1103; the LP form of direction-preserving allocation is Bodson
 2002, "Evaluation of optimization methods for control allocation", J. Guid. Control Dyn. 25(4)).
 Each level is scaled along its own direction, never bent, and every DOF demanded zero (K = M = 0
 in 4-DOF use) is an equality. When every level reaches 1 the demand is met exactly. Among the
