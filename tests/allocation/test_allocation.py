@@ -56,6 +56,17 @@ def test_square_unconstrained_is_the_inverse(udrone, rng):
     np.testing.assert_allclose(alloc.forces(tau)[0], np.linalg.solve(SPEC_B, tau), atol=1e-12)
 
 
+def test_unconstrained_is_the_plain_pseudo_inverse_and_says_so(heavy):
+    alloc = Allocator(heavy, saturation=False)
+    tau = np.array([150.0, 0, 0, 0, 0, 0])  # beyond the four horizontal T200s (51.5 N at 16 V)
+    res = alloc.allocate(tau)
+    np.testing.assert_allclose(res.forces, alloc.T @ tau, atol=1e-12)  # not clipped
+    np.testing.assert_allclose(res.achieved, tau, atol=1e-9)
+    assert res.saturated and res.over_limit == ("T1", "T2", "T3", "T4")
+    assert np.all(res.pwm_us[:4] >= 1100) and np.all(res.pwm_us[:4] <= 1900)  # commands saturate
+    assert Allocator(heavy).allocate(tau).over_limit == ()
+
+
 def test_weighted_pinv_minimises_weighted_effort(heavy, rng):
     B = configuration_matrix(heavy)
     w = rng.uniform(0.5, 3.0, 8)

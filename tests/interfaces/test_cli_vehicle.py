@@ -79,6 +79,20 @@ def test_allocate_json_contract(capsys):
     assert json.loads(out)["saturated"] is True
 
 
+def test_allocate_unconstrained_reports_forces_beyond_limits(capsys):
+    # 200 N down on uDrone: the plain inverse asks T3 for far more than its -13.0 N reverse limit
+    code, out, _ = run(capsys, "allocate", "--wrench", "0", "0", "200", "0", "--mode", "unconstrained", "--json")
+    data = json.loads(out)
+    assert code == 0 and data["saturated"] is True
+    assert "T3" in data["over_limit"]
+    assert data["forces"][2] < -13.0  # not clipped: the pseudo-inverse as it is
+    np.testing.assert_allclose(data["achieved"], [0, 0, 200, 0, 0, 0], atol=1e-9)
+    code, out, _ = run(capsys, "allocate", "--wrench", "0", "0", "200", "0", "--mode", "unconstrained")
+    assert "beyond the thrust limits: T1, T2, T3" in out
+    code, out, _ = run(capsys, "allocate", "--wrench", "0", "0", "10", "0", "--mode", "unconstrained", "--json")
+    assert json.loads(out)["over_limit"] == [] and json.loads(out)["saturated"] is False
+
+
 def test_allocate_bad_input(capsys):
     code, _, err = run(capsys, "allocate", "--wrench", "1", "2", "3")
     assert code == 2 and "4 values" in err

@@ -2,16 +2,16 @@
 
 * Unconstrained: the weighted pseudo-inverse T = W^-1/2 pinv(B W^-1/2) (for a square,
   invertible B this is B^-1, so a 4-DOF demand is met exactly with K = M = 0; Fossen 2011,
-  sec. 12.3.2).
-* Saturation-aware (the default): the demand is split into priority levels (DOF groups).
-  Level by level, the largest fraction alpha in [0, 1] of that level's wrench that keeps every
-  thruster within its own asymmetric limits [f_min_i, f_max_i] is added, so a level that
-  cannot be met is *scaled* along its own direction and never bent; lower levels get what is
-  left. With one level holding all DOFs this is direction-preserving scaling of the whole
-  wrench. For redundant thruster sets, thrusters that hit a limit are frozen there and the rest
-  of the level is redistributed over the free ones while they still span the wrench space
-  (redistributed pseudo-inverse, Bodson 2002, J. Guid. Control Dyn. 25(4)).
-  No thruster force is ever clipped on its own.
+  sec. 12.3.2). The forces may exceed the thrusters' limits; the result says which do.
+* Saturation-aware (the default): the demand is split into priority levels (DOF groups) and
+  each level is scaled along its own direction by a fraction alpha in [0, 1]: the highest level
+  gets the largest fraction any force vector within the asymmetric limits [f_min_i, f_max_i] can
+  give, the next the largest with that one held, and so on (the exact lexicographic optimum,
+  solved by small compiled LPs in rovlab.allocation.lexicographic). DOFs demanded zero stay zero,
+  nothing is bent, a feasible demand is met exactly, and among the force vectors giving the
+  optimal wrench the least weighted effort f^T W f is used (redundant sets use their null
+  space). With one level holding all DOFs this is direction-preserving scaling of the whole
+  wrench. No thruster force is ever clipped on its own.
 """
 
 from __future__ import annotations
@@ -23,12 +23,12 @@ import numpy as np
 from numba import njit
 
 from rovlab.allocation.geometry import configuration_matrix
+from rovlab.allocation.lexicographic import lexicographic_allocate
 from rovlab.models.thrusters import ThrusterBank, bank_pwm
 from rovlab.params.vehicle import WRENCH6, Vehicle
 
 DEFAULT_PRIORITY: tuple[tuple[str, ...], ...] = (("K", "M"), ("Z",), ("N",), ("X", "Y"))
 SCALE_ALL: tuple[tuple[str, ...], ...] = (WRENCH6,)
-_TOL = 1e-9
 
 
 def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
@@ -42,120 +42,20 @@ def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarra
 
 
 @njit(cache=True)
-def matvec(A: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """A @ v as a plain loop: for these 6 x n matrices a BLAS call costs more than the sums."""
-    out = np.zeros(A.shape[0])
-    for i in range(A.shape[0]):
-        acc = 0.0
-        for j in range(A.shape[1]):
-            acc += A[i, j] * v[j]
-        out[i] = acc
-    return out
-
-
-@njit(cache=True)
-def _max_fraction(f: np.ndarray, d: np.ndarray, f_min: np.ndarray, f_max: np.ndarray,
-                  free: np.ndarray) -> float:
-    alpha = 1.0
-    for i in range(f.shape[0]):
-        if not free[i]:
-            continue
-        if d[i] > _TOL:
-            alpha = min(alpha, (f_max[i] - f[i]) / d[i])
-        elif d[i] < -_TOL:
-            alpha = min(alpha, (f_min[i] - f[i]) / d[i])
-    return max(alpha, 0.0)
-
-
-@njit(cache=True)
-def _add_wrench(B: np.ndarray, T: np.ndarray, s: np.ndarray, f_min: np.ndarray, f_max: np.ndarray,
-                f: np.ndarray, dtau: np.ndarray, redistribute: bool) -> float:
-    """Add the largest fraction a in [0, 1] of the wrench increment dtau to the forces f (in
-    place) that keeps every thruster within its limits, without changing the direction of
-    dtau; return a. Redundant sets redistribute over unsaturated thrusters first."""
-    n = B.shape[1]
-    free_all = np.ones(n, dtype=np.bool_)
-    d = matvec(T, dtau)
-    total = _max_fraction(f, d, f_min, f_max, free_all)
-    f += total * d
-    if not redistribute or total >= 1.0 - _TOL or n <= 6:
-        return total
-    free = free_all.copy()
-    for _ in range(n):
-        n_free = 0
-        for i in range(n):
-            if f[i] >= f_max[i] - 1e-9 or f[i] <= f_min[i] + 1e-9:
-                free[i] = False  # freeze thrusters sitting at a limit
-            if free[i]:
-                n_free += 1
-        if n_free < 6:
-            break
-        Bs = np.zeros((6, n))
-        for i in range(n):
-            if free[i]:
-                Bs[:, i] = B[:, i] * s[i]
-        Tf = np.linalg.pinv(Bs)
-        for i in range(n):
-            Tf[i, :] *= s[i]
-        rest = (1.0 - total) * dtau
-        d2 = Tf @ rest
-        # accept only if the free thrusters reproduce the remaining wrench exactly
-        if np.max(np.abs(B @ d2 - rest)) > 1e-7 * (1.0 + np.max(np.abs(rest))):
-            break
-        a2 = _max_fraction(f, d2, f_min, f_max, free)
-        f += a2 * d2
-        total += (1.0 - total) * a2
-        if a2 >= 1.0 - _TOL or a2 <= _TOL:
-            break
-    return total
-
-
-@njit(cache=True)
 def allocate_kernel(B: np.ndarray, T: np.ndarray, s: np.ndarray, f_min: np.ndarray, f_max: np.ndarray,
                     tau: np.ndarray, level: np.ndarray, n_levels: int, redistribute: bool):
     """Prioritised, direction-preserving allocation. Returns (f, fraction per DOF).
 
-    ``level[j]`` is the priority level of DOF j (0 = highest); ``s`` = W^-1/2 is used to build
-    weighted pseudo-inverses of thruster subsets when redistributing.
-
-    1. The whole wrench at once: if it is feasible (possibly after redistribution) it is met
-       exactly and nothing else is done.
-    2. Otherwise level by level from the top, each adding the largest feasible fraction of its
-       own wrench on top of the levels above (lower levels start at zero).
-    3. Two more sweeps in priority order let each level grow further where the levels added
-       after it have freed thruster capacity (their forces can cancel), so the top level never
-       gets less than it would alone.
+    ``level[j]`` is the priority level of DOF j (0 = highest); ``s`` = W^-1/2 (T is the
+    weighted pseudo-inverse built with it). Each level is scaled along its own direction by the
+    largest fraction possible once the levels above hold theirs (the exact lexicographic
+    optimum, found by small LP stages), DOFs demanded zero stay zero, and the forces are the
+    least-effort ones giving that wrench; a feasible demand is met exactly. With one level this
+    is the largest direction-preserving scaling of the whole wrench. ``redistribute=False``
+    keeps the forces in the pseudo-inverse's range (no null-space use on redundant vehicles).
+    See rovlab.allocation.lexicographic.
     """
-    n = B.shape[1]
-    f = np.zeros(n)
-    frac = np.ones(6)
-    total = _add_wrench(B, T, s, f_min, f_max, f, tau.copy(), redistribute)
-    if total >= 1.0 - _TOL or n_levels == 1:
-        for j in range(6):
-            if tau[j] != 0.0:
-                frac[j] = 1.0 if total >= 1.0 - _TOL else total
-        return f, frac
-    f[:] = 0.0
-    alpha = np.zeros(n_levels)
-    for sweep in range(3):
-        for lv in range(n_levels):
-            if alpha[lv] >= 1.0 - _TOL:
-                continue
-            dtau = np.zeros(6)
-            any_dof = False
-            for j in range(6):
-                if level[j] == lv and tau[j] != 0.0:
-                    dtau[j] = (1.0 - alpha[lv]) * tau[j]
-                    any_dof = True
-            if not any_dof:
-                alpha[lv] = 1.0
-                continue
-            a = _add_wrench(B, T, s, f_min, f_max, f, dtau, redistribute)
-            alpha[lv] += (1.0 - alpha[lv]) * a
-    for j in range(6):
-        if tau[j] != 0.0:
-            frac[j] = alpha[level[j]]
-    return f, frac
+    return lexicographic_allocate(B, T, s, f_min, f_max, tau, level, n_levels, redistribute)
 
 
 @dataclass(frozen=True)
@@ -165,8 +65,9 @@ class AllocationResult:
     demanded: np.ndarray  # 6-DOF wrench asked for [X, Y, Z, K, M, N]
     achieved: np.ndarray  # 6-DOF wrench the forces produce
     fraction: np.ndarray  # per DOF: achieved share of the demand (1 = met)
-    saturated: bool  # some DOF could not be met in full
+    saturated: bool  # some DOF could not be met in full (unconstrained: some force is beyond its limits)
     thruster_names: tuple[str, ...]
+    over_limit: tuple[str, ...] = ()  # unconstrained only: thrusters whose force is beyond their limits
 
     def limited_dofs(self) -> list[str]:
         return [name for name, fr in zip(WRENCH6, self.fraction) if fr < 1.0 - 1e-6]
@@ -181,6 +82,7 @@ class AllocationResult:
             "fraction": self.fraction.tolist(),
             "saturated": bool(self.saturated),
             "limited_dofs": self.limited_dofs(),
+            "over_limit": list(self.over_limit),
         }
 
 
@@ -189,7 +91,9 @@ class Allocator:
 
     ``priority`` lists DOF groups from most to least important (a DOF not listed goes last);
     ``SCALE_ALL`` keeps the whole wrench direction instead. ``saturation=False`` gives the
-    plain unconstrained pseudo-inverse (forces may exceed the limits; PWM is then saturated).
+    plain unconstrained pseudo-inverse: the forces are T tau as they are, possibly beyond the
+    thrusters' limits (listed in ``over_limit``; their PWM commands saturate, so the real
+    wrench then differs from ``achieved``, which is what the unconstrained forces would give).
     """
 
     def __init__(self, vehicle: Vehicle, *, priority: Sequence[Sequence[str]] = DEFAULT_PRIORITY,
@@ -226,15 +130,14 @@ class Allocator:
         tau6 = as_wrench6(tau)
         f, frac = self.forces(tau6)
         pwm = bank_pwm(self.bank.rows, self.bank.grid_pwm, self.bank.grid_force, f)
+        achieved = self.B @ f
         if not self.saturation:
-            f_real = np.clip(f, self.bank.f_min, self.bank.f_max)
-            achieved = self.B @ f_real
-            sat = bool(np.any(f > self.bank.f_max + 1e-9) or np.any(f < self.bank.f_min - 1e-9))
+            over = (f > self.bank.f_max + 1e-9) | (f < self.bank.f_min - 1e-9)
+            names = tuple(name for name, o in zip(self.bank.names, over) if o)
+            # a rank-deficient B gives the least-squares wrench: report its share per DOF
             frac = np.array([a / d if abs(d) > 1e-12 else 1.0 for a, d in zip(achieved, tau6)])
-            f = f_real
-        else:
-            achieved = self.B @ f
-            sat = bool(np.any(frac < 1.0 - 1e-9))
+            return AllocationResult(f, pwm, tau6, achieved, frac, bool(over.any()), self.bank.names, names)
+        sat = bool(np.any(frac < 1.0 - 1e-9))
         return AllocationResult(f, pwm, tau6, achieved, frac, sat, self.bank.names)
 
 

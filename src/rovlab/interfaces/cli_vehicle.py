@@ -45,8 +45,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     alloc.add_argument("--wrench", type=float, nargs="+", required=True, metavar="V",
                        help="X Y Z N [N, N m] (K = M = 0 demanded) or X Y Z K M N")
     alloc.add_argument("--mode", choices=("priority", "scale", "unconstrained"), default="priority",
-                       help="priority: give up lower-priority DOFs first (K,M > Z > N > X,Y); "
-                            "scale: keep the wrench direction; unconstrained: plain pseudo-inverse")
+                       help="priority: the largest share of each DOF group in turn, K,M > Z > N > X,Y, "
+                            "each scaled along its own direction; scale: the largest share of the whole "
+                            "wrench, direction kept; unconstrained: plain pseudo-inverse, forces may exceed "
+                            "the thrusters' limits (reported; their PWM then saturates)")
     alloc.add_argument("--json", action="store_true", help="machine-readable output")
     alloc.set_defaults(func=_cmd_allocate)
 
@@ -213,7 +215,10 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
     print("  thruster   force [N]   pwm [us]   limits [N]")
     for i, name in enumerate(res.thruster_names):
         print(f"  {name:8s} {res.forces[i]:10.3f} {res.pwm_us[i]:10.1f}   {alloc.f_min[i]:+.1f} .. {alloc.f_max[i]:+.1f}")
-    if res.saturated:
+    if res.over_limit:
+        print("  beyond the thrust limits: " + ", ".join(res.over_limit)
+              + " (unconstrained pseudo-inverse: their PWM commands saturate, so the real wrench differs)")
+    elif res.saturated:
         print("  saturated: " + ", ".join(f"{d} at {f:.0%}" for d, f in
                                           zip(("X", "Y", "Z", "K", "M", "N"), res.fraction) if f < 1 - 1e-6))
     else:
