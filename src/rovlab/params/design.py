@@ -66,11 +66,11 @@ File format (every table is closed: unknown keys are errors; ``source`` is requi
     damping = 1.0                          # zeta_m
     max_step = 0.5                         # [m] depth step the reference model must manage with
                                            # the thrusters (checked against the allocation)
-    lambda = 1.0                           # [1/s] composite error s = e_dot + lambda e
-    k_s = 40.0                             # [N s/m] feedback on s
+    lambda = 2.0                           # [1/s] composite error s = e_dot + lambda e
+    k_s = 80.0                             # [N s/m] feedback on s
     sigma = 0.0                            # [1/s] sigma-modification (0 = projection only)
     hedge = true                           # pseudo-control hedging when the thrusters saturate
-    gain = { M = 20.0, D_l = 20.0, D_q = 20.0, F = 20.0 }       # adaptation gains Gamma
+    gain = { M = 50.0, D_l = 50.0, D_q = 50.0, F = 300.0 }      # adaptation gains Gamma
     initial = { M = 18.44, D_l = 5.18, D_q = 36.99, F = -6.67 } # optional; default: the model
     bounds = { M = [5.0, 60.0], F = [-30.0, 30.0] }             # optional projection set
 
@@ -162,14 +162,14 @@ class MRACConfig:
     bandwidth: float = 0.6  # omega_m [rad/s]
     damping: float = 1.0  # zeta_m
     max_step: float = 0.5  # [m]
-    lam: float = 1.0  # lambda [1/s]
-    k_s: float = 40.0  # [N s/m]
+    lam: float = 2.0  # lambda [1/s]
+    k_s: float = 80.0  # [N s/m]
     sigma: float = 0.0  # [1/s]
     hedge: bool = True
-    gain: Mapping[str, float] = field(default_factory=lambda: {"M": 20.0, "D_l": 20.0, "D_q": 20.0, "F": 20.0})
+    gain: Mapping[str, float] = field(default_factory=lambda: {"M": 50.0, "D_l": 50.0, "D_q": 50.0, "F": 300.0})
     initial: Mapping[str, float] = field(default_factory=dict)
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    source: str = "rovlab defaults (docs/mrac.md)"
+    source: str = "rovlab defaults, tuned in simulation on the heave-* scenarios (rovlab.control.mrac)"
     given: bool = False  # the file had an [mrac] table
 
 
