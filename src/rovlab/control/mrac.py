@@ -228,11 +228,11 @@ class MRACDesign:
         c = self.config
         return {
             "bandwidth": c.bandwidth, "damping": c.damping, "max_step": c.max_step, "lambda": c.lam, "k_s": c.k_s,
-            "sigma": c.sigma, "hedge": c.hedge,
+            "sigma": c.sigma, "hedge": c.hedge, "sampled_radius": self.sampled_radius,
             "parameters": list(PARAMETERS), "units": [UNITS[p] for p in PARAMETERS],
             "initial": self.theta0.tolist(), "lower": self.lo.tolist(), "upper": self.hi.tolist(),
-            "gain": self.gamma.tolist(), "sampled_radius": self.sampled_radius,
-            "heave_force_needed": list(self.heave_force_needed),
+            "gain": self.gamma.tolist(),
+            "heave_force_needed": [float(f) for f in self.heave_force_needed],
         }
 
 
@@ -315,7 +315,7 @@ def heave_force_needed(theta: np.ndarray, omega: float, zeta: float, step: float
             f = M * a + Dl * x[1] + Dq * abs(x[1]) * x[1]
             extreme = max(extreme, sign * f)
             x = Phi @ x + G[:, 0] * sign * step
-        out.append(sign * extreme - F)
+        out.append(float(sign * extreme - F))
     return out[0], out[1]
 
 
