@@ -296,9 +296,8 @@ def write_report_html(path: str | Path, title: str, sections: Sequence[Mapping[s
     if intro:
         parts.append(f"<p>{html.escape(intro)}</p>")
     if len(sections) > 1:
-        labels = sorted({lbl for s in sections for lbl, _ in summary_rows(s["metrics"])},
-                        key=lambda lbl: [r for r, _ in summary_rows(sections[0]["metrics"])].index(lbl)
-                        if lbl in [r for r, _ in summary_rows(sections[0]["metrics"])] else 99)
+        # in order of first appearance: the first section's rows, then what later ones add
+        labels = list(dict.fromkeys(lbl for s in sections for lbl, _ in summary_rows(s["metrics"])))
         table = {s["title"]: dict(summary_rows(s["metrics"])) for s in sections}
         parts.append("<h2>Summary</h2><table><tr><th></th>" + "".join(f"<th>{html.escape(s['title'])}</th>"
                                                                        for s in sections) + "</tr>")
