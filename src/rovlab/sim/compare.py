@@ -216,7 +216,8 @@ def table(comparison: Mapping[str, Any]) -> str:
     cols = [("RMS err [cm]", "depth_error_rms", 100.0), ("peak [cm]", "depth_error_peak", 100.0),
             ("settle [s]", "settling_time_s", 1.0), ("last 10 s [cm]", "last10s_rms", 100.0),
             ("effort [N]", "effort_rms", 1.0), ("saturated [s]", "saturation_s", 1.0)]
-    lines = [head, f"{'controller':10s} " + " ".join(f"{c[0]:>16s}" for c in cols) + f" {'bounds':>7s} {'diverged':>8s}"]
+    header = f"{'controller':10s} " + " ".join(f"{c[0]:>16s}" for c in cols) + f" {'bounds':>7s} {'diverged':>8s}"
+    lines = [head, header]
     for ctl in ctls:
         e = comparison[ctl]
         cells = []
