@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from rovlab.interfaces.hmi.session import CommandError, Session
@@ -32,6 +33,12 @@ def test_switching_to_mrac_reaches_the_loop_and_streams_the_adapted_parameters(h
     # the reference model starts where the vehicle is when MRAC takes over
     est = [m for topic, _, m in msgs if topic == "/rovlab/estimate"][0]
     assert cmds[0]["controller"]["z_m"] == pytest.approx(est["state"]["z"])
+    # and the session log keeps them (columns ctrl_<name>, as in a batch run's timeseries.csv)
+    cols = heave.log.run.arrays()
+    assert {"ctrl_F_hat", "ctrl_M_hat", "ctrl_z_m"} <= set(cols)
+    assert np.isnan(cols["ctrl_F_hat"][0]) and np.isfinite(cols["ctrl_F_hat"][-1])  # LQG first, then MRAC
+    csv = [p for p in heave.export(["csv"]) if p.suffix == ".csv"]
+    assert any("ctrl_F_hat" in p.read_text().splitlines()[0] for p in csv)
 
 
 def test_mrac_gains_are_tuned_live_and_bad_ones_refused(heave):
