@@ -230,10 +230,10 @@
     const pwm = make("pwm", { title: "thruster commands", unit: "µs", minSpan: 20 });
     src.thrusters.forEach((name, i) => pwm.add({ name, label: name, color: PWM_COLORS[i % PWM_COLORS.length], width: 1.3 }));
     if (cs.includes("F_hat")) {  // MRAC: the adapted parameters, live
-      const f = make("mrac_F", { title: "MRAC: adapted net down force F̂ (truth: W − B + bias + pull)", unit: "N", minSpan: 0.5 });
+      const f = make("mrac_F", { title: "MRAC F̂ (net down force)", unit: "N", minSpan: 0.5 });
       if (src.has_truth) f.add({ name: "truth", label: "truth", color: COLORS.truth, width: 1.2 });
       f.add({ name: "F_hat", label: "F̂", color: COLORS.est, width: 1.6 });
-      const m = make("mrac_M", { title: "MRAC: M̂ [kg], D̂_l [N s/m], D̂_q [N s²/m²]", unit: "SI", minSpan: 1 });
+      const m = make("mrac_M", { title: "MRAC M̂, D̂_l, D̂_q", unit: "SI", minSpan: 1 });
       m.add({ name: "M_hat", label: "M̂", color: "#2f6fd6", width: 1.4 });
       m.add({ name: "D_l_hat", label: "D̂_l", color: "#e58a12", width: 1.4 });
       m.add({ name: "D_q_hat", label: "D̂_q", color: "#8a4fd1", width: 1.4 });
