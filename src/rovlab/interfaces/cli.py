@@ -15,6 +15,7 @@ _COMMAND_MODULES = (
     "rovlab.interfaces.cli_sim",
     "rovlab.interfaces.cli_design",
     "rovlab.interfaces.cli_hmi",
+    "rovlab.interfaces.cli_compare",
 )
 
 

@@ -32,6 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     demo.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     demo.add_argument("--runs", type=int, default=200, help="Monte Carlo runs for the consistency check (default 200)")
     demo.add_argument("--workers", type=int, default=None, help="parallel worker processes (default: all cores)")
+    demo.add_argument("--compare-runs", type=int, default=50,
+                      help="runs per controller of the MRAC/LQG heave comparisons (default 50; 0 skips them)")
     demo.set_defaults(func=_cmd_demo)
 
 
@@ -162,11 +164,45 @@ def _print_summary(rows: list[tuple[str, dict[str, Any]]]) -> None:
           " NEES/dof near 1 means the filter's covariance matches its errors)")
 
 
+_COMPARISONS = ("heave-buoyancy-step", "heave-payload", "heave-tether")
+
+
+def _demo_comparisons(out: Path, runs: int) -> list[dict[str, Any]]:
+    """MRAC against LQG + bias estimate on the heave scenarios (issue 12), for the report."""
+    from rovlab.interfaces.cli_compare import run_comparison
+
+    sections = []
+    for i, name in enumerate(_COMPARISONS, 1):
+        t0 = time.perf_counter()
+        print(f"[compare {i}/{len(_COMPARISONS)}] {name}: lqg vs mrac, {runs} runs each ...", end="", flush=True)
+        comparison, folder, notes = run_comparison(name, ["lqg", "mrac"], runs, None, out / f"compare-{name}",
+                                                   quiet=True)
+        print(f" done in {time.perf_counter() - t0:.1f} s -> {folder}/")
+        from rovlab.sim.compare import table
+
+        print(table(comparison))
+        for n in notes:
+            print(f"  note: {n}")
+        png = folder / "comparison.png"
+        sections.append({"title": f"MRAC vs LQG: {name}",
+                         "description": f"{comparison['description']}. {comparison['source']}. Both controllers "
+                                        "meet the same seeds; the error is the true depth against the MRAC "
+                                        "reference model (rovlab.sim.compare).",
+                         "metrics": comparison, "figures": [png] if png.exists() else [],
+                         "text": table(comparison),
+                         "extra": f"{runs} runs per controller; files in compare-{name}/"})
+    return sections
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from rovlab.io.report import write_report_html
     from rovlab.sim.scenario import load_scenario_data
 
     _check_counts(args)
+    if args.compare_runs < 0:
+        from rovlab.interfaces.cli import UserError
+
+        raise UserError(f"--compare-runs must be >= 0, got {args.compare_runs}")
     out = Path(args.out)
     cases = ("step-observer-model", "step-process-model", "dropout")
     print(f"rovlab demo: the thesis case studies (Sandøy 2016, figs. 5.2-5.4) on uDrone -> {out}/")
@@ -204,6 +240,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                              if k.startswith("rms_error.")}},
                          "figures": [nees_png] if nees_png.exists() else [],
                          "extra": f"seeds {summary['seeds'][0]}..{summary['seeds'][-1]}; {summary['wall_time_s']:.2f} s"})
+    if args.compare_runs > 0:
+        sections += _demo_comparisons(out, args.compare_runs)
     report = write_report_html(out / "report.html", "rovlab demo: uDrone case studies", sections,
                                intro="Depth and heading LQG (Kalman filter + LQR) of uDrone, reproducing the "
                                      "simulation case studies of Sandøy (2016), ch. 5, with the numbers of "

@@ -6,7 +6,8 @@ a real one (a real vehicle simply has no ``/rovlab/truth``).
 
 Column naming of a time-series log (rovlab.io.timeseries) maps onto the topics:
 ``true_*`` -> truth, ``est_*`` and ``var_*`` and ``status_*`` -> estimate, ``meas_*`` ->
-measurement, ``ref_*`` -> reference, ``tau_*`` and ``pwm_*`` -> command.
+measurement, ``ref_*`` -> reference, ``tau_*`` and ``pwm_*`` -> command; a controller's own state (``ctrl_*``,
+e.g. MRAC's adapted parameters) travels with the command as ``controller``.
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ TOPICS: dict[str, dict[str, Any]] = {
         "sensors": {"type": "object", "additionalProperties": {"type": "string"}}}},
     "/rovlab/measurement": {"type": "object", "properties": {"t": _NUM, "values": _MAP}},
     "/rovlab/reference": {"type": "object", "properties": {"t": _NUM, "state": _MAP}},
-    "/rovlab/command": {"type": "object", "properties": {"t": _NUM, "tau": _MAP, "pwm_us": _MAP}},
+    "/rovlab/command": {"type": "object", "properties": {"t": _NUM, "tau": _MAP, "pwm_us": _MAP,
+                                                         "controller": _MAP}},
 }
 
 
@@ -56,9 +58,14 @@ def reference_message(t: float, state: Mapping[str, float]) -> dict[str, Any]:
     return {"t": float(t), "state": {k: _clean(v) for k, v in state.items()}}
 
 
-def command_message(t: float, tau: Mapping[str, float], pwm_us: Mapping[str, float]) -> dict[str, Any]:
-    return {"t": float(t), "tau": {k: _clean(v) for k, v in tau.items()},
-            "pwm_us": {k: _clean(v) for k, v in pwm_us.items()}}
+def command_message(t: float, tau: Mapping[str, float], pwm_us: Mapping[str, float],
+                    controller: Mapping[str, float] | None = None) -> dict[str, Any]:
+    """Commands of time t; ``controller``: the controller's own state (left out when it has none)."""
+    out = {"t": float(t), "tau": {k: _clean(v) for k, v in tau.items()},
+           "pwm_us": {k: _clean(v) for k, v in pwm_us.items()}}
+    if controller:
+        out["controller"] = {k: _clean(v) for k, v in controller.items()}
+    return out
 
 
 def _group(columns: Mapping[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:
@@ -68,7 +75,8 @@ def _group(columns: Mapping[str, np.ndarray], prefix: str) -> dict[str, np.ndarr
 def row_messages(columns: Mapping[str, np.ndarray], k: int) -> Iterator[tuple[str, float, dict[str, Any]]]:
     """The messages of row k of a time-series log."""
     t = float(columns["time_s"][k])
-    groups = {p: _group(columns, p) for p in ("true_", "est_", "var_", "status_", "meas_", "ref_", "tau_", "pwm_")}
+    groups = {p: _group(columns, p) for p in ("true_", "est_", "var_", "status_", "meas_", "ref_", "tau_", "pwm_",
+                                              "ctrl_")}
     if groups["true_"]:
         yield "/rovlab/truth", t, truth_message(t, {n: c[k] for n, c in groups["true_"].items()})
     if groups["est_"]:
@@ -82,7 +90,8 @@ def row_messages(columns: Mapping[str, np.ndarray], k: int) -> Iterator[tuple[st
         yield "/rovlab/reference", t, reference_message(t, {n: c[k] for n, c in groups["ref_"].items()})
     if groups["tau_"] or groups["pwm_"]:
         yield "/rovlab/command", t, command_message(t, {n: c[k] for n, c in groups["tau_"].items()},
-                                                    {n: c[k] for n, c in groups["pwm_"].items()})
+                                                    {n: c[k] for n, c in groups["pwm_"].items()},
+                                                    {n: c[k] for n, c in groups["ctrl_"].items()})
 
 
 def rows_to_messages(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, float, dict[str, Any]]]:

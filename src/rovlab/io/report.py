@@ -238,8 +238,30 @@ def _fmt(v: Any, digits: int = 4) -> str:
     return html.escape(str(v))
 
 
+def comparison_rows(comparison: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """(label, value) rows of a controller comparison (rovlab.sim.compare): per controller, the
+    depth error against the reference model and what it cost."""
+    rows: list[tuple[str, str]] = []
+    for ctl in comparison.get("controllers", []):
+        e = comparison.get(ctl, {})
+        for key, label, k in (("depth_error_rms", "RMS depth error vs reference model [cm]", 100.0),
+                              ("depth_error_peak", "peak depth error [cm]", 100.0),
+                              ("settling_time_s", "settling time to 1 cm [s]", 1.0),
+                              ("last10s_rms", "last-10 s RMS depth error [cm]", 100.0),
+                              ("effort_rms", "RMS heave force [N]", 1.0),
+                              ("saturation_s", "time saturated [s]", 1.0)):
+            v = e.get(key)
+            rows.append((f"{ctl}: {label}", _fmt(None if v is None else v * k, 3)))
+        if "parameter_bounds_held" in e:
+            rows.append((f"{ctl}: adapted parameters within bounds", _fmt(bool(e["parameter_bounds_held"]))))
+        rows.append((f"{ctl}: diverged runs", _fmt(e.get("diverged"))))
+    return rows
+
+
 def summary_rows(metrics: Mapping[str, Any]) -> list[tuple[str, str]]:
-    """(label, value) rows of the headline numbers of one run's metrics."""
+    """(label, value) rows of the headline numbers of one run's metrics (or of a comparison)."""
+    if "controllers" in metrics:
+        return comparison_rows(metrics)
     rows: list[tuple[str, str]] = []
     rms = metrics.get("rms_error", {})
     for s, unit, k in (("z", "m", 1.0), ("psi", "deg", _DEG), ("w", "m/s", 1.0), ("r", "deg/s", _DEG)):
@@ -274,9 +296,8 @@ def write_report_html(path: str | Path, title: str, sections: Sequence[Mapping[s
     if intro:
         parts.append(f"<p>{html.escape(intro)}</p>")
     if len(sections) > 1:
-        labels = sorted({lbl for s in sections for lbl, _ in summary_rows(s["metrics"])},
-                        key=lambda lbl: [r for r, _ in summary_rows(sections[0]["metrics"])].index(lbl)
-                        if lbl in [r for r, _ in summary_rows(sections[0]["metrics"])] else 99)
+        # in order of first appearance: the first section's rows, then what later ones add
+        labels = list(dict.fromkeys(lbl for s in sections for lbl, _ in summary_rows(s["metrics"])))
         table = {s["title"]: dict(summary_rows(s["metrics"])) for s in sections}
         parts.append("<h2>Summary</h2><table><tr><th></th>" + "".join(f"<th>{html.escape(s['title'])}</th>"
                                                                        for s in sections) + "</tr>")
@@ -293,6 +314,8 @@ def write_report_html(path: str | Path, title: str, sections: Sequence[Mapping[s
             + "</table>")
         if s.get("extra"):
             parts.append(f"<p class='muted'>{html.escape(s['extra'])}</p>")
+        if s.get("text"):
+            parts.append("<pre>" + html.escape(s["text"]) + "</pre>")
         for fig in s.get("figures", []):
             parts.append(_img(Path(fig)))
         parts.append("<details><summary>all metrics (metrics.json)</summary><pre>"

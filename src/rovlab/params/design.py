@@ -66,6 +66,20 @@ relative to the filter's own prior variance, see rovlab.estimation.fusion.)
     # Q_diag = [...4...]  R_diag = [...2...]   # explicit weights instead of Bryson's rule
     reference_gain = "discrete"            # or "continuous" (what the thesis computed)
 
+    [mrac]                                 # optional: model-reference adaptive heave control
+    source = "..."                         # (used when controller = "mrac"; see rovlab.control.mrac)
+    bandwidth = 0.6                        # omega_m [rad/s] of the second-order reference model
+    damping = 1.0                          # zeta_m
+    max_step = 0.5                         # [m] depth step the reference model must manage with
+                                           # the thrusters (checked against the allocation)
+    lambda = 2.0                           # [1/s] composite error s = e_dot + lambda e
+    k_s = 80.0                             # [N s/m] feedback on s
+    sigma = 0.0                            # [1/s] sigma-modification (0 = projection only)
+    hedge = true                           # pseudo-control hedging when the thrusters saturate
+    gain = { M = 50.0, D_l = 50.0, D_q = 50.0, F = 300.0 }      # adaptation gains Gamma
+    initial = { M = 18.44, D_l = 5.18, D_q = 36.99, F = -6.67 } # optional; default: the model
+    bounds = { M = [5.0, 60.0], F = [-30.0, 30.0] }             # optional projection set
+
 Units are SI and radians, except keys ending in ``_deg`` / ``_deg_s`` (degrees, degrees/s).
 This module only reads and checks the file; the maths lives in ``rovlab.estimation`` and
 ``rovlab.control``.
@@ -153,6 +167,31 @@ class MeasurementConfig:
                           "filter configuration")
 
 
+MRAC_PARAMETERS = ("M", "D_l", "D_q", "F")  # heave mass, linear and quadratic damping, net down force
+
+
+@dataclass(frozen=True)
+class MRACConfig:
+    """The [mrac] table: reference model, adaptation gains and the projection set (SI units).
+
+    ``initial`` and ``bounds`` hold only what the file gives; the rest is filled from the model
+    by rovlab.control.mrac (which also checks that the initial estimates lie in the bounds).
+    """
+
+    bandwidth: float = 0.6  # omega_m [rad/s]
+    damping: float = 1.0  # zeta_m
+    max_step: float = 0.5  # [m]
+    lam: float = 2.0  # lambda [1/s]
+    k_s: float = 80.0  # [N s/m]
+    sigma: float = 0.0  # [1/s]
+    hedge: bool = True
+    gain: Mapping[str, float] = field(default_factory=lambda: {"M": 50.0, "D_l": 50.0, "D_q": 50.0, "F": 300.0})
+    initial: Mapping[str, float] = field(default_factory=dict)
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    source: str = "rovlab defaults, tuned in simulation on the heave-* scenarios (rovlab.control.mrac)"
+    given: bool = False  # the file had an [mrac] table
+
+
 @dataclass(frozen=True, eq=False)
 class DesignConfig:
     """A validated filter/controller configuration (SI units, radians)."""
@@ -175,6 +214,7 @@ class DesignConfig:
     file: str = ""
     estimator: str = "kf"  # the estimator component (rovlab.sim.components.ESTIMATORS)
     controller: str = "lqg"  # the controller component (rovlab.sim.components.CONTROLLERS)
+    mrac: MRACConfig = field(default_factory=MRACConfig)  # the optional [mrac] table
 
     @property
     def W(self) -> np.ndarray:
@@ -314,6 +354,9 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
                        "that 1/max^2 overflows is not a limit")
     reference = lt.string("reference_gain", "discrete", choices=("discrete", "continuous"))
     lt.finish()
+    mrac = _mrac_table(top.table("mrac", required=False), present=top.has("mrac"))
+    if mrac.given:
+        sources["mrac"] = mrac.source
     top.finish()
     col.raise_if_any("filter configuration")
 
@@ -324,6 +367,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         bias_time_per_mass=per_mass, bias_time_constant=constants, measurements=tuple(measurements),
         initial_state=x0, initial_std=std, lqr_Q=Q, lqr_R=R, lqr_bryson=bryson,
         reference_gain=reference, sources=sources, file=file, estimator=estimator, controller=controller,
+        mrac=mrac,
     )
 
 
@@ -430,6 +474,51 @@ def _lqr_weights(t: TableReader) -> tuple[np.ndarray, np.ndarray, dict[str, np.n
         Q = bryson_diagonal(np.where(np.isfinite(smax) & (smax > 0), smax, np.nan), sw)
         R = bryson_diagonal(np.where(np.isfinite(umax) & (umax > 0), umax, np.nan), uw)
     return Q, R, {"state_max": smax, "input_max": umax, "state_weight": sw, "input_weight": uw}
+
+
+def _mrac_table(t: TableReader, *, present: bool) -> MRACConfig:
+    """The optional [mrac] table (closed schema; every problem collected)."""
+    base = MRACConfig()
+    if not present:
+        return base
+    source = t.string("source")
+    omega = t.number("bandwidth", base.bandwidth, positive=True, hi=100.0, what="omega_m of the reference model in rad/s")
+    zeta = t.number("damping", base.damping, positive=True, hi=10.0, what="zeta_m of the reference model")
+    step = t.number("max_step", base.max_step, positive=True, what="depth step in m the thrusters must manage")
+    lam = t.number("lambda", base.lam, positive=True, what="1/s, in s = e_dot + lambda e")
+    k_s = t.number("k_s", base.k_s, positive=True, what="N s/m, feedback on s")
+    sigma = t.number("sigma", base.sigma, nonnegative=True, what="1/s, sigma-modification; 0 = off")
+    hedge = t.boolean("hedge", base.hedge)
+    gain = dict(base.gain)
+    g = t.table("gain", required=False)
+    for key in MRAC_PARAMETERS:
+        if g.has(key):
+            gain[key] = g.number(key, nonnegative=True, what="adaptation gain; 0 freezes the parameter")
+    g.finish()
+    initial: dict[str, float] = {}
+    it = t.table("initial", required=False)
+    for key in MRAC_PARAMETERS:
+        if it.has(key):
+            initial[key] = it.number(key, positive=key == "M", nonnegative=key in ("D_l", "D_q"),
+                                     what={"M": "kg", "D_l": "N s/m", "D_q": "N s^2/m^2", "F": "N, down"}[key])
+    it.finish()
+    bounds: dict[str, tuple[float, float]] = {}
+    bt = t.table("bounds", required=False)
+    for key in MRAC_PARAMETERS:
+        if bt.has(key):
+            lo, hi = bt.vector(key, 2, what="[lowest, highest]")
+            if np.all(np.isfinite([lo, hi])):
+                floor = 0.0 if key != "F" else -math.inf
+                if not lo < hi:
+                    bt.problem(key, [lo, hi], "[lowest, highest] with lowest < highest")
+                elif lo < floor or (key == "M" and lo <= 0.0):
+                    bt.problem(key, [lo, hi], "a positive lower bound for M, >= 0 for D_l and D_q")
+                else:
+                    bounds[key] = (float(lo), float(hi))
+    bt.finish()
+    t.finish()
+    return MRACConfig(bandwidth=omega, damping=zeta, max_step=step, lam=lam, k_s=k_s, sigma=sigma, hedge=hedge,
+                      gain=gain, initial=initial, bounds=bounds, source=source, given=True)
 
 
 def check_design_config_file(name_or_path: str | Path) -> list[Problem]:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from rovlab.control import lqg
+from rovlab.control import lqg, mrac
 from rovlab.core.components import ControllerSpec, EstimatorSpec
 from rovlab.estimation import kf
 from rovlab.params.design import DesignConfig
@@ -22,6 +22,7 @@ ESTIMATORS: dict[str, Callable[[Vehicle, DesignConfig], EstimatorSpec]] = {
 }
 CONTROLLERS: dict[str, Callable[[Vehicle, DesignConfig], ControllerSpec]] = {
     "lqg": lqg.build,  # LQR depth and heading with bias feed-forward (SPEC section 6)
+    "mrac": mrac.build,  # model-reference adaptive heave control, LQR heading (SPEC section 6)
 }
 
 

@@ -26,7 +26,7 @@ from rovlab.io.messages import row_messages
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
 from rovlab.sim.loop import Drive, draw
-from rovlab.sim.runner import DesignBook, Prepared, Simulation, columns, prepare, schedule
+from rovlab.sim.runner import DesignBook, Prepared, Simulation, columns, disturbances, prepare, schedule
 from rovlab.sim.scenario import Scenario, load_scenario
 
 _MODES = {"auto": MODE_AUTO, "off": MODE_OFF, "on": MODE_ON}
@@ -171,7 +171,9 @@ class LiveSimulation:
             refs[:, 2], refs[:, 3] = self.reference
         n_sub = prep.plant.n_sub
         normals = draw(self.rng, n, n_sub, type(prep.plant).DRAWS, len(prep.channels))
-        logs = self.sim.advance(Drive(*normals, dropout, refs))
+        heave, pset = disturbances(self.scenario, times, observer=self.scenario.plant == "observer",
+                                   g=prep.truth.gravity)
+        logs = self.sim.advance(Drive(*normals, dropout, refs, heave, pset))
         cols = columns(prep, logs, times, refs)
         out = []
         for i in range(n):

@@ -51,6 +51,8 @@ class Drive(NamedTuple):
     sensor_normals: np.ndarray  # (n, m): measurement noise
     dropout: np.ndarray  # (n, m) bool: no sample from channel j at row i
     refs: np.ndarray  # (n, 4): reference [x, y, z, psi]
+    heave_force: np.ndarray  # (n,): extra downward heave force on the plant [N] (tether pull ...)
+    pset: np.ndarray  # (n,) int64: which of the plant's parameter sets holds (truth events)
 
 
 class Logs(NamedTuple):

@@ -5,7 +5,10 @@
   force on the body is tau (from the thrusters) + b (Gauss-Markov biases, advanced with their
   exact discrete form) + w_nu (white noise of power spectral density W, held over each RK4 step
   as N(0, W / h), the zero-order-hold equivalent of white noise). The restoring force is in the
-  packed parameters (rovlab.models.kinetics.pack).
+  packed parameters (rovlab.models.kinetics.pack). Truth events (a payload picked up, floats
+  soaking up water: rovlab.sim.scenario) switch between the packed parameter sets ``p_sets``
+  (row 0 is ``p``), chosen per control step by the drive (``drive.pset``), and a per-step extra
+  downward heave force (``drive.heave_force``, e.g. a tether pull) adds to the thrust.
 * :class:`ObserverPlant` ("perfect model"): the linear depth-and-heading model with its bias
   states, advanced exactly: x_{k+1} = Phi_h x_k + Delta_h u + L_h n_k, L_h L_h^T = Q_h (Van Loan
   at the plant step), so the filter's assumptions hold exactly. Its input is the wrench the
@@ -42,8 +45,10 @@ class ProcessPlant(NamedTuple):
     k: np.ndarray  # (4, 8) RK4 work
     f: np.ndarray  # (4) work
     tb: np.ndarray  # (4) work
+    p_sets: np.ndarray  # (n_sets, P_SIZE): the parameters after each truth event (row 0 = p)
+    dist: np.ndarray  # (2): parameter set and extra heave force [N] of the last step
 
-    STATE = ("x", "bias")
+    STATE = ("x", "bias", "dist")
     DRAWS = 4  # standard normal draws per RK4 step
 
 
@@ -57,8 +62,9 @@ class ObserverPlant(NamedTuple):
     n_sub: int
     tmp: np.ndarray  # (6) work
     u: np.ndarray  # (2) work
+    dist: np.ndarray  # (1): extra heave force [N] of the last step (events, tether)
 
-    STATE = ("x",)
+    STATE = ("x", "dist")
     DRAWS = 6
 
 
@@ -69,10 +75,12 @@ def _process_truth(plant, truth):
         truth[i] = x[i]
     truth[3] = wrap_angle(x[3])
     # the force the estimator's bias states should absorb: Gauss-Markov bias + net buoyancy
+    # (+ the extra heave force of the last step)
     truth[8] = plant.bias[0]
     truth[9] = plant.bias[1]
-    net_up = submerged(plant.p, x[2]) * plant.p[P_BUOY] - plant.p[P_WEIGHT]
-    truth[10] = plant.bias[2] - net_up
+    ps = plant.p_sets[int(plant.dist[0])]
+    net_up = submerged(ps, x[2]) * ps[P_BUOY] - ps[P_WEIGHT]
+    truth[10] = plant.bias[2] + plant.dist[1] - net_up
     truth[11] = plant.bias[3]
 
 
@@ -96,8 +104,13 @@ def _process_step(plant, drive, row, tau_cmd, tau_real):
     tau_b = plant.tb
     for i in range(4):
         tau_b[i] = tau_real[i] + plant.bias[i]
-    process_advance(plant.p, plant.x, tau_b, plant.h, plant.noise_std,
+    extra = drive.heave_force[row]
+    tau_b[2] += extra
+    j = drive.pset[row]
+    process_advance(plant.p_sets[j], plant.x, tau_b, plant.h, plant.noise_std,
                     drive.plant_normals[row * n:(row + 1) * n], plant.k, plant.f)
+    plant.dist[0] = j
+    plant.dist[1] = extra
     for i in range(4):
         plant.bias[i] = plant.bias_phi[i] * plant.bias[i] + plant.bias_std[i] * drive.bias_normals[row, i]
 
@@ -111,7 +124,7 @@ def _observer_truth(plant, truth):
     truth[3] = wrap_angle(x[1])
     truth[6] = x[2]
     truth[7] = x[3]
-    truth[10] = x[4]
+    truth[10] = x[4] + plant.dist[0]
     truth[11] = x[5]
 
 
@@ -135,8 +148,9 @@ def linear_advance(Phi, Delta, L, x, u, normals, tmp):
 def _observer_step(plant, drive, row, tau_cmd, tau_real):
     n = plant.n_sub
     u = plant.u
-    u[0] = tau_cmd[2]
+    u[0] = tau_cmd[2] + drive.heave_force[row]
     u[1] = tau_cmd[3]
+    plant.dist[0] = drive.heave_force[row]
     linear_advance(plant.Phi, plant.Delta, plant.L, plant.x, u,
                    drive.plant_normals[row * n:(row + 1) * n], plant.tmp)
 

@@ -62,6 +62,8 @@ def make_design(vehicle: Vehicle, config: DesignConfig, *, plant: str, plant_ste
                 estimator: str | None = None, controller: str | None = None, file: str | None = None) -> Design:
     """Design the estimator, controller and allocation (raises ConfigError)."""
     est, ctl = build_pair(vehicle, config, estimator=estimator, controller=controller, file=file)
+    alloc = Allocator(vehicle)
+    check_heave_capacity(ctl, alloc, file or config.file or config.name)
     observer = None
     if plant == "observer":
         fm = est.model
@@ -72,7 +74,27 @@ def make_design(vehicle: Vehicle, config: DesignConfig, *, plant: str, plant_ste
         disc = discretise(fm.A, fm.B, fm.E, fm.W, plant_step)
         observer = (np.ascontiguousarray(disc.Phi), np.ascontiguousarray(disc.Delta),
                     np.ascontiguousarray(psd_factor(disc.Q)))
-    return Design(vehicle, config, est, ctl, Allocator(vehicle), plant, plant_step, observer)
+    return Design(vehicle, config, est, ctl, alloc, plant, plant_step, observer)
+
+
+def check_heave_capacity(ctl: ControllerSpec, alloc: Allocator, where: str) -> None:
+    """A controller whose design says what heave force its reference model takes
+    (``model.heave_force_needed`` = (down, up) [N], e.g. MRAC) must get it from the thrusters
+    (allocation with K = M = 0); ConfigError naming the [mrac] keys otherwise."""
+    need = getattr(ctl.model, "heave_force_needed", None)
+    if need is None:
+        return
+    down_cap = float(alloc.allocate([0.0, 0.0, 1e6, 0.0]).achieved[2])
+    up_cap = float(alloc.allocate([0.0, 0.0, -1e6, 0.0]).achieved[2])
+    down, up = float(need[0]), float(need[1])
+    if down > down_cap or up < up_cap:
+        cfg = ctl.model.config
+        raise ConfigError([Problem(where, "mrac.bandwidth", cfg.bandwidth,
+                                   f"a reference model the thrusters can follow: a {cfg.max_step:g} m depth step "
+                                   f"(mrac.max_step) with bandwidth {cfg.bandwidth:g} rad/s and damping "
+                                   f"{cfg.damping:g} takes {down:.1f} N down / {up:.1f} N on the model (holding its "
+                                   f"net weight), the thrusters give {down_cap:.1f} N down / {up_cap:.1f} N; lower "
+                                   "the bandwidth or max_step")], "filter configuration")
 
 
 class DesignBook:
@@ -172,12 +194,13 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     sensors = sensor_bank(est.channels, truth, h)
     times = np.arange(n_ctrl) * h
     dropout, refs = schedule(sc, est.channels, times)
+    heave, pset = disturbances(sc, times, observer=sc.plant == "observer", g=truth.gravity)
 
     # plant: initial state, then every draw of the run in a fixed order (rovlab.sim.loop.draw)
     bias0 = sc.bias_std * rng.standard_normal(4)  # start in the stationary distribution
     plant = make_plant(design, sc, truth, n_sub, bias0)
     normals = draw(rng, n_ctrl, n_sub, type(plant).DRAWS, len(est.channels))
-    drive = Drive(*normals, dropout, refs)
+    drive = Drive(*normals, dropout, refs, heave, pset)
 
     alloc = design.allocator
     same = truth.thrusters is vehicle.thrusters
@@ -232,21 +255,67 @@ def schedule(sc: Scenario, channels: tuple[Any, ...], times: np.ndarray,
     return dropout, refs
 
 
+def disturbances(sc: Scenario, times: np.ndarray, *, observer: bool = False, g: float = 9.81
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Per control step: the extra downward heave force [N] and the plant's parameter set (the
+    number of truth events that have happened; rovlab.sim.plant). The observer plant has no
+    parameter sets: its events act as a force (buoyancy and weight only)."""
+    times = np.asarray(times, dtype=float)
+    heave = np.zeros(len(times))
+    if sc.tether.amplitude != 0.0 or sc.tether.mean != 0.0:
+        heave += sc.tether.force(times)
+    ev_t = np.array([e.t_s for e in sc.events], dtype=float)
+    pset = np.searchsorted(ev_t, times + 1e-9, side="right").astype(np.int64)  # events at t <= t_k
+    if observer and sc.events:
+        net = np.concatenate([[0.0], np.cumsum([e.buoyancy_change - e.mass_change * g for e in sc.events])])
+        heave -= net[pset]  # buoyancy gained pulls up (negative z)
+        pset[:] = 0
+    return heave, pset
+
+
+def parameter_sets(truth: Vehicle, sc: Scenario) -> np.ndarray:
+    """Packed parameters of the true vehicle before and after each truth event (cumulative)."""
+    rows = []
+    dm = db = 0.0
+    problems = []
+    for i, e in enumerate([None, *sc.events]):
+        if e is not None:
+            dm += e.mass_change
+            db += e.buoyancy_change
+        mass = truth.mass + dm
+        if not mass > 0.0:
+            problems.append(Problem(sc.file, f"truth.event[{i - 1}].mass_change", e.mass_change if e else dm,
+                                    f"a change that leaves a positive mass (vehicle {truth.mass:g} kg, "
+                                    f"total change {dm:g} kg)"))
+            mass = truth.mass
+        p = kin.pack(truth.with_updates(mass=mass) if dm else truth)
+        # extra buoyancy (positive = lighter): the scenario's offset plus the events so far
+        p[kin.P_BUOY] += db + sc.buoyancy_offset
+        p[kin.P_GZ] += db + sc.buoyancy_offset
+        rows.append(p)
+    if problems:
+        raise ConfigError(problems, "scenario file")
+    return np.ascontiguousarray(np.array(rows))
+
+
 def make_plant(design: Design, sc: Scenario, truth: Vehicle, n_sub: int,
                bias0: np.ndarray) -> ProcessPlant | ObserverPlant:
     """The plant component at the scenario's initial state."""
     if design.observer_plant is not None:
         Phi_p, Delta_p, L_p = design.observer_plant
         x0 = np.array([sc.initial[2], sc.initial[3], sc.initial[6], sc.initial[7], 0.0, 0.0])
-        return ObserverPlant(Phi_p, Delta_p, L_p, x0, n_sub, np.empty(6), np.empty(2))
-    p = kin.pack(truth)
-    p[kin.P_BUOY] += sc.buoyancy_offset  # extra net buoyancy (positive = lighter), e.g. a float
-    p[kin.P_GZ] += sc.buoyancy_offset
+        if any(e.mass_change for e in sc.events):
+            raise ConfigError([Problem(sc.file, "truth.event", "a mass_change",
+                                       "buoyancy changes only: the observer plant is the linear design "
+                                       "model with a fixed mass (use plant = \"process\")")], "scenario file")
+        return ObserverPlant(Phi_p, Delta_p, L_p, x0, n_sub, np.empty(6), np.empty(2), np.zeros(1))
+    p_sets = parameter_sets(truth, sc)
+    p = p_sets[0].copy()
     phi, std = gauss_markov_coefficients(sc.bias_std**2, 1.0 / sc.bias_time_constant_s, design.estimator.h)
     return ProcessPlant(p, sc.initial.astype(float).copy(), np.asarray(bias0, dtype=float).copy(),
                         np.asarray(phi, dtype=float), np.asarray(std, dtype=float),
                         np.sqrt(sc.process_noise_psd / sc.plant_step_s), float(sc.plant_step_s), int(n_sub),
-                        np.empty((4, 8)), np.empty(4), np.empty(4))
+                        np.empty((4, 8)), np.empty(4), np.empty(4), p_sets, np.zeros(2))
 
 
 def _load_ref(sc: Scenario, key: str, loader: Callable[[str], Any], book: DesignBook) -> Any:

@@ -39,6 +39,19 @@ initial state, the reference schedule, drop-out windows, the true disturbances a
     parameters = { mass = 7.6 }     # plant truth differing from the vehicle file (any of
                                     # mass, I_zz, X_udot ... N_rdot, displaced_volume)
 
+    [[truth.event]]                 # a sudden change of the plant from t_s on (cumulative)
+    t_s = 40.0
+    mass_change = 0.5               # kg of rigid-body mass picked up (< 0: dropped); its weight
+                                    # comes with it (net buoyancy falls by mass_change * g)
+    buoyancy_change = -4.0          # N of buoyancy gained (positive = lighter), e.g. floats
+                                    # soaking up water (< 0) or a payload's displaced volume (> 0)
+
+    [truth.tether]                  # a slowly varying vertical pull (positive = down, N):
+    mean = 1.0                      # mean + amplitude * sin(2 pi t / period_s + phase)
+    amplitude = 2.0
+    period_s = 40.0
+    phase_deg = 0.0
+
 Distributions (for Monte Carlo): any number above may be written as
 ``{ dist = "normal", mean = 1.05, std = 0.02 }`` or ``{ dist = "uniform", low = 0.9, high = 1.2 }``.
 Each run draws them from its own seed, so a run is replayed from its seed alone.
@@ -91,6 +104,29 @@ class Dropout:
     end_s: float
 
 
+@dataclass(frozen=True)
+class TruthEvent:
+    """A sudden change of the plant at t_s (SI): rigid-body mass added and buoyancy gained."""
+
+    t_s: float
+    mass_change: float = 0.0  # [kg]; its weight comes with it
+    buoyancy_change: float = 0.0  # [N], positive = lighter
+
+
+@dataclass(frozen=True)
+class Tether:
+    """A vertical pull [N, positive down]: mean + amplitude sin(2 pi t / period_s + phase)."""
+
+    mean: float = 0.0
+    amplitude: float = 0.0
+    period_s: float = 60.0
+    phase: float = 0.0  # [rad]
+
+    def force(self, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        return self.mean + self.amplitude * np.sin(2.0 * math.pi * t / self.period_s + self.phase)
+
+
 @dataclass(frozen=True, eq=False)
 class Scenario:
     """One concrete run (distributions already drawn). SI units, radians."""
@@ -118,6 +154,8 @@ class Scenario:
     file: str = ""
     estimator: str | None = None  # overrides the design configuration's choice
     controller: str | None = None
+    events: tuple[TruthEvent, ...] = ()  # [[truth.event]], in time order
+    tether: Tether = Tether()  # [truth.tether]
 
     def reference_at(self, t: float) -> tuple[float, float]:
         k = int(np.searchsorted(self.reference_times, t, side="right")) - 1
@@ -282,6 +320,8 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
                 truth_params[key] = params.number(key, nonpositive=True, plausible=PLAUSIBLE["added_mass"],
                                                   what="SNAME sign")
     params.finish()
+    events = _events(tr)
+    tether = _tether(tr)
     tr.finish()
     top.finish()
     _check_references(top, vehicle, design, step, dropouts)
@@ -292,7 +332,7 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
         reference_times=np.array(times), reference_z=np.array(zs), reference_psi=np.array(psis),
         dropouts=tuple(dropouts), process_noise_psd=psd, bias_std=bias_std, bias_time_constant_s=bias_T,
         buoyancy_offset=buoy, pwm_resolution_us=pwm_res, truth_parameters=truth_params, file=file,
-        estimator=estimator, controller=controller,
+        estimator=estimator, controller=controller, events=events, tether=tether,
     )
 
 
@@ -362,3 +402,33 @@ def _dof_numbers(tr: TableReader, key: str, defaults: dict[str, float], positive
                                plausible=ranges[d] if ranges else None) for d in DOF_NAMES])
     sub.finish()
     return out
+
+
+def _events(tr: TableReader) -> tuple[TruthEvent, ...]:
+    """[[truth.event]]: sudden changes of the plant, in increasing time."""
+    out: list[TruthEvent] = []
+    for ev in tr.tables("event", required=False):
+        t = ev.number("t_s", nonnegative=True)
+        dm = ev.number("mass_change", 0.0, what="kg of rigid-body mass added (< 0: dropped)")
+        db = ev.number("buoyancy_change", 0.0, what="N of buoyancy gained (positive = lighter)")
+        if not ev.has("mass_change") and not ev.has("buoyancy_change"):
+            ev.problem("mass_change", "neither mass_change nor buoyancy_change",
+                       "at least one of mass_change [kg] and buoyancy_change [N]")
+        ev.finish()
+        if out and math.isfinite(t) and math.isfinite(out[-1].t_s) and t <= out[-1].t_s:
+            ev.problem("t_s", t, f"a time after the previous event ({out[-1].t_s:g} s)")
+        out.append(TruthEvent(t, dm, db))
+    return tuple(out)
+
+
+def _tether(tr: TableReader) -> Tether:
+    """[truth.tether]: a slowly varying vertical pull."""
+    te = tr.table("tether", required=False)
+    tether = Tether(
+        mean=te.number("mean", 0.0, what="N, positive down"),
+        amplitude=te.number("amplitude", 0.0, nonnegative=True, what="N"),
+        period_s=te.number("period_s", 60.0, positive=True, what="s"),
+        phase=te.number("phase_deg", 0.0, what="degrees") * _DEG,
+    )
+    te.finish()
+    return tether

@@ -32,7 +32,7 @@ _FIELDS = {
     "/rovlab/estimate": (("state", "est_"), ("variance", "var_"), ("sensors", "status_")),
     "/rovlab/measurement": (("values", "meas_"),),
     "/rovlab/reference": (("state", "ref_"),),
-    "/rovlab/command": (("tau", "tau_"), ("pwm_us", "pwm_")),
+    "/rovlab/command": (("tau", "tau_"), ("pwm_us", "pwm_"), ("controller", "ctrl_")),
 }
 
 

@@ -100,6 +100,8 @@ class SimulationSource:
                           "offset": c.offset} for c in fm.channels],
             "sensors": list(sim.sensor_available),
             "thrusters": list(sim.prep.allocator.bank.names),
+            "controller": _controller_name(sim.prep),
+            "controller_states": list(sim.prep.design.controller.state_names),
         }
 
     def status(self) -> dict[str, Any]:
@@ -139,7 +141,7 @@ class SimulationSource:
         prep = self.sim.prep
         fm = prep.filter_model
         v, t = prep.vehicle, prep.truth
-        return {
+        out: dict[str, Any] = {
             "model": {**prep.config.model_values(v), "T_w": fm.T_w, "T_r": fm.T_r,
                       "M_w": fm.params.M_w, "M_r": fm.params.M_r},
             "vehicle": _vehicle_summary(v),
@@ -151,7 +153,16 @@ class SimulationSource:
             "lqr_R": _floats(prep.config.lqr_R),
             "K": [_floats(row) for row in prep.K],
             "P": [_floats(row) for row in prep.Pref],
+            "controller": _controller_name(prep),
         }
+        summary = getattr(prep.design.controller.model, "summary", None)
+        if callable(summary):  # an adaptive controller's design (MRAC: reference model, gains, bounds)
+            out["mrac"] = summary()
+        return out
+
+
+def _controller_name(prep: Any) -> str:
+    return prep.scenario.controller or prep.config.controller
 
 
 def _floats(a: Any) -> list[float]:

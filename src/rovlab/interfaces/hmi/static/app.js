@@ -189,7 +189,8 @@
 
   function buildCharts() {
     const src = hmi.source;
-    const signature = JSON.stringify([src.channels, src.thrusters]);
+    const cs = src.controller_states || [];
+    const signature = JSON.stringify([src.channels, src.thrusters, cs]);
     if (signature === chartSignature) return;
     chartSignature = signature;
     const grid = $("charts");
@@ -218,6 +219,9 @@
       if (id === "z" || id === "psi") {
         c.add({ name: "ref", label: "reference", kind: "step", color: COLORS.ref, dash: [6, 4], width: 1.5, legend: false });
       }
+      if (id === "z" && cs.includes("z_m")) {
+        c.add({ name: "zm", label: "MRAC reference model", color: COLORS.ref, dash: [2, 3], width: 1.3 });
+      }
     }
     renderLegend();
     for (const ch of src.channels) channelsByColumn[ch.column] = ch;
@@ -225,6 +229,15 @@
     make("tau_N", { title: "yaw moment τ_N", unit: "N m", minSpan: 0.01 }).add({ name: "v", label: "allocated", color: "#2f6fd6", legend: false });
     const pwm = make("pwm", { title: "thruster commands", unit: "µs", minSpan: 20 });
     src.thrusters.forEach((name, i) => pwm.add({ name, label: name, color: PWM_COLORS[i % PWM_COLORS.length], width: 1.3 }));
+    if (cs.includes("F_hat")) {  // MRAC: the adapted parameters, live
+      const f = make("mrac_F", { title: "MRAC F̂ (net down force)", unit: "N", minSpan: 0.5 });
+      if (src.has_truth) f.add({ name: "truth", label: "truth", color: COLORS.truth, width: 1.2 });
+      f.add({ name: "F_hat", label: "F̂", color: COLORS.est, width: 1.6 });
+      const m = make("mrac_M", { title: "MRAC M̂, D̂_l, D̂_q", unit: "SI", minSpan: 1 });
+      m.add({ name: "M_hat", label: "M̂", color: "#2f6fd6", width: 1.4 });
+      m.add({ name: "D_l_hat", label: "D̂_l", color: "#e58a12", width: 1.4 });
+      m.add({ name: "D_q_hat", label: "D̂_q", color: "#8a4fd1", width: 1.4 });
+    }
   }
 
   function sensorColor(sensor) {
@@ -265,6 +278,7 @@
           const spec = STATE_CHARTS[k];
           if (spec && v !== null) charts[k].push("truth", t, v * spec.k);
         }
+        if (charts.mrac_F && m.state.b_w !== undefined && m.state.b_w !== null) charts.mrac_F.push("truth", t, m.state.b_w);
       } else if (topic === "/rovlab/estimate") {
         for (const [k, v] of Object.entries(m.state)) {
           const spec = STATE_CHARTS[k];
@@ -293,6 +307,12 @@
         if (m.tau.Z !== undefined) charts.tau_Z.push("v", t, m.tau.Z);
         if (m.tau.N !== undefined) charts.tau_N.push("v", t, m.tau.N);
         for (const [name, v] of Object.entries(m.pwm_us || {})) charts.pwm.push(name, t, v);
+        for (const [name, v] of Object.entries(m.controller || {})) {
+          if (v === null) continue;
+          if (name === "z_m" && charts.z) charts.z.push("zm", t, v);
+          else if (name === "F_hat" && charts.mrac_F) charts.mrac_F.push("F_hat", t, v);
+          else if (charts.mrac_M && (name === "M_hat" || name === "D_l_hat" || name === "D_q_hat")) charts.mrac_M.push(name, t, v);
+        }
       }
       if (!(t < hmi.stats.lastT)) hmi.stats.lastT = t;
     }
@@ -645,9 +665,49 @@
     });
   }
 
+  function controllerForm(box) {
+    const current = hmi.docs.config.controller || "lqg";
+    box.appendChild(el("h4", { text: "Depth controller" }));
+    const sel = el("select", {
+      dataset: { key: "controller" },
+      onchange: (ev) => send("set", { target: "config", key: "controller", value: ev.target.value })
+        .catch((e) => { toast(e.message, true); ev.target.value = current; }),
+    }, el("option", { value: "lqg", text: "LQG: LQR + bias estimate" }),
+    el("option", { value: "mrac", text: "MRAC: adaptive heave, heading on the LQR" }));
+    sel.value = current;
+    box.appendChild(sel);
+    if ((hmi.loop && hmi.loop.controller) === "mrac") mracForm(box);
+  }
+
+  function mracForm(box) {
+    const used = (hmi.loop && hmi.loop.mrac) || {};
+    // a new [mrac] table needs its source (closed schema, SPEC: every number carries its source)
+    const extra = () => (hmi.docs.config.mrac && hmi.docs.config.mrac.source) ? {} : { "mrac.source": "tuned in the rovlab HMI" };
+    const ph = (v) => () => (v === undefined ? "" : short(v, 4));
+    const gain = (i) => ph((used.gain || [])[i]);
+    box.appendChild(el("h4", { text: "MRAC reference model (empty: default, shown grey)" }));
+    fieldRows(box, "config", [
+      { key: "mrac.bandwidth", label: "bandwidth ω_m", unit: "rad/s", optional: true, placeholder: ph(used.bandwidth), extra },
+      { key: "mrac.damping", label: "damping ζ_m", unit: "", optional: true, placeholder: ph(used.damping), extra },
+      { key: "mrac.max_step", label: "largest depth step", unit: "m", optional: true, placeholder: ph(used.max_step), extra },
+    ]);
+    box.appendChild(el("h4", { text: "MRAC law and adaptation" }));
+    fieldRows(box, "config", [
+      { key: "mrac.lambda", label: "λ (s = ė + λ e)", unit: "1/s", optional: true, placeholder: ph(used.lambda), extra },
+      { key: "mrac.k_s", label: "k_s", unit: "N s/m", optional: true, placeholder: ph(used.k_s), extra },
+      { key: "mrac.sigma", label: "σ-modification", unit: "1/s", optional: true, placeholder: ph(used.sigma), extra },
+      { key: "mrac.gain.M", label: "gain Γ_M", unit: "SI", optional: true, placeholder: gain(0), extra },
+      { key: "mrac.gain.D_l", label: "gain Γ_Dl", unit: "SI", optional: true, placeholder: gain(1), extra },
+      { key: "mrac.gain.D_q", label: "gain Γ_Dq", unit: "SI", optional: true, placeholder: gain(2), extra },
+      { key: "mrac.gain.F", label: "gain Γ_F", unit: "SI", optional: true, placeholder: gain(3), extra },
+    ]);
+  }
+
   function lqrForm() {
     const box = $("form-lqr");
     box.textContent = "";
+    controllerForm(box);
+    box.appendChild(el("h4", { text: "LQR (heading; depth too with LQG)" }));
     const lqr = hmi.docs.config.lqr || {};
     const bryson = lqr.state_max !== undefined || lqr.input_max !== undefined;
     box.appendChild(el("div", { class: "radio" },
@@ -712,10 +772,23 @@
     if (!loop) return;
     const row = (a) => a.map((x) => short(x, 4).padStart(11)).join(" ");
     const m = loop.model;
+    let mracText = "";
+    if (loop.mrac) {
+      const a = loop.mrac;
+      const vec = (v) => v.map((x) => short(x, 4).padStart(9)).join(" ");
+      mracText = "\n\nMRAC (heave): Z = Yᵀθ̂ − k_s s,  s = ė + λ e,  e = z − z_m\n" +
+        `reference model: ω_m = ${short(a.bandwidth)} rad/s, ζ_m = ${short(a.damping)}; hedging ${a.hedge ? "on" : "off"}\n` +
+        `θ = [${a.parameters.join(", ")}]  (${a.units.join(", ")})\n` +
+        `initial ${vec(a.initial)}\nlower   ${vec(a.lower)}\nupper   ${vec(a.upper)}\ngain Γ  ${vec(a.gain)}\n` +
+        `sampled loop spectral radius ${short(a.sampled_radius, 3)}; a ${short(a.max_step)} m step takes ` +
+        `${short(a.heave_force_needed[0], 3)} N down / ${short(a.heave_force_needed[1], 3)} N`;
+    }
     $("loop-lqr").textContent =
-      "τ = P r − K x − b̂\nK (rows Z, N; columns z, ψ, w, r)\n" + loop.K.map(row).join("\n") +
+      (loop.mrac ? "heading: N = P r − K x − b̂_N (LQR row N)\n" : "τ = P r − K x − b̂\n") +
+      "K (rows Z, N; columns z, ψ, w, r)\n" + loop.K.map(row).join("\n") +
       "\n\nP\n" + loop.P.map(row).join("\n") +
-      `\n\nmodel: M_w = ${short(m.M_w)} kg, M_r = ${short(m.M_r)} kg m²\n       Z_w = ${short(m.Z_w)}, N_r = ${short(m.N_r)}`;
+      `\n\nmodel: M_w = ${short(m.M_w)} kg, M_r = ${short(m.M_r)} kg m²\n       Z_w = ${short(m.Z_w)}, N_r = ${short(m.N_r)}` +
+      mracText;
     for (const node of document.querySelectorAll("[data-buoyancy]")) {
       const v = loop[node.dataset.buoyancy];
       node.textContent = v ? `net buoyancy B − W = ${short(v.net_buoyancy, 3)} N (positive floats up)` : "";
@@ -738,6 +811,7 @@
       (d.config.measurements || []).map(measurementId), knownMeasurements.length,
       d.config.process_noise && d.config.process_noise.bias_time_per_mass !== undefined,
       d.config.lqr && d.config.lqr.state_max !== undefined,
+      d.config.controller || "lqg", hmi.loop && hmi.loop.controller,
     ]);
     if (signature !== formSignature) {
       formSignature = signature;
@@ -747,6 +821,8 @@
       observerForm();
       lqrForm();
     }
+    const csel = document.querySelector('[data-key="controller"]');
+    if (csel && document.activeElement !== csel) csel.value = d.config.controller || "lqg";
     const sel = document.querySelector('[data-key="lqr.reference_gain"]');
     if (sel && document.activeElement !== sel) sel.value = (d.config.lqr && d.config.lqr.reference_gain) || "discrete";
     refreshForms();
@@ -805,8 +881,9 @@
     hmi.loop = msg.loop;
     if (msg.source) {
       const changed = JSON.stringify(msg.source.channels) !== JSON.stringify(hmi.source.channels);
+      const ctlChanged = JSON.stringify(msg.source.controller_states || []) !== JSON.stringify(hmi.source.controller_states || []);
       hmi.source = msg.source;
-      if (changed) { buildCharts(); renderSensors(); renderBadges(); }
+      if (changed) { buildCharts(); renderSensors(); renderBadges(); } else if (ctlChanged) buildCharts();
     }
     renderForms();
   }
