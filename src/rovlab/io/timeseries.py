@@ -1,4 +1,4 @@
-"""Time-series logs of a run (simulated or real) as MCAP.
+"""Time-series logs of a run (simulated or real) as MCAP, for Foxglove and ROS 2 tools.
 
 A log is an ordered mapping column name -> 1-D array of equal length, with ``time_s`` first (its
 CSV form is written by :func:`rovlab.io.logs.write_csv`). The MCAP file holds the same rows as JSON
@@ -9,35 +9,82 @@ and other robotics tools.
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
 from rovlab.core.files import atomic_open
+from rovlab.io import ros2msg
 from rovlab.io.messages import TOPICS, rows_to_messages
 
 
-def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata: Mapping[str, str] | None = None) -> Path:
-    """Write the rows as JSON messages on the topics of rovlab.io.messages (requires `mcap`)."""
+def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata: Mapping[str, str] | None = None,
+               start_time_s: float | None = None) -> Path:
+    """Write the rows to MCAP (requires `mcap`): every column as JSON messages on the topics of
+    rovlab.io.messages (JSON Schema declared: Foxglove plots any field), and, where the
+    mcap-ros2-support package is present, the poses and velocities as ROS 2 nav_msgs/Odometry
+    (/rovlab/odometry/truth, /rovlab/odometry/estimate with the filter's variances) and the
+    wrench as geometry_msgs/WrenchStamped (/rovlab/wrench), which Foxglove's 3D panel and ROS 2
+    tools open without configuration. Log times are wall-clock: ``start_time_s`` (UNIX seconds of
+    the run's start; default now) + time_s."""
     try:
         from mcap.writer import CompressionType, Writer
     except ImportError as exc:  # pragma: no cover - optional extra
         raise RuntimeError("writing MCAP needs the 'mcap' package: pip install 'rovlab[log]'") from exc
+    try:  # the CDR encoder of mcap-ros2-support (what its own Writer uses)
+        from mcap_ros2._dynamic import serialize_dynamic
+    except ImportError:  # pragma: no cover - optional extra
+        serialize_dynamic = None
+    t0_ns = int(round((time.time() if start_time_s is None else float(start_time_s)) * 1e9))
     path = Path(path)
     with atomic_open(path, "wb") as fh:
         writer = Writer(fh, compression=CompressionType.NONE)
         writer.start(profile="", library="rovlab")
         channel_ids: dict[str, int] = {}
         for topic, schema in TOPICS.items():
-            sid = writer.register_schema(name=f"rovlab{topic.replace('/', '.')}", encoding="jsonschema",
+            sid = writer.register_schema(name="rovlab." + topic.rsplit("/", 1)[-1], encoding="jsonschema",
                                          data=json.dumps(schema).encode())
             channel_ids[topic] = writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
-        if metadata:
-            writer.add_metadata("rovlab", {k: str(v) for k, v in metadata.items()})
-        for seq, (topic, t, msg) in enumerate(rows_to_messages(columns)):
-            stamp = int(round(t * 1e9))
+        encoders = {}
+        if serialize_dynamic is not None:
+            for topic, datatype in ROS2_TOPICS.items():
+                text = ros2msg.DEFINITIONS[datatype]
+                sid = writer.register_schema(name=datatype, encoding="ros2msg", data=text.encode())
+                channel_ids[topic] = writer.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
+                encoders[topic] = serialize_dynamic(datatype, text)[datatype]
+        meta = {"start_time_unix_s": f"{t0_ns / 1e9:.9f}", "world_frame": ros2msg.WORLD_FRAME,
+                "body_frame": ros2msg.BODY_FRAME, **{k: str(v) for k, v in (metadata or {}).items()}}
+        writer.add_metadata("rovlab", meta)
+        seq = 0
+        for topic, t, msg in rows_to_messages(columns):
+            stamp = t0_ns + int(round(t * 1e9))
             writer.add_message(channel_ids[topic], log_time=stamp, data=json.dumps(msg).encode(),
                                publish_time=stamp, sequence=seq)
+            seq += 1
+            if not encoders:
+                continue
+            for ros_topic, ros_msg in _ros2_messages(topic, stamp, msg):
+                writer.add_message(channel_ids[ros_topic], log_time=stamp, data=encoders[ros_topic](ros_msg),
+                                   publish_time=stamp, sequence=seq)
+                seq += 1
         writer.finish()
     return path
+
+
+ROS2_TOPICS = {
+    "/rovlab/odometry/truth": ros2msg.ODOMETRY,
+    "/rovlab/odometry/estimate": ros2msg.ODOMETRY,
+    "/rovlab/wrench": ros2msg.WRENCH_STAMPED,
+}
+
+
+def _ros2_messages(topic: str, stamp: int, msg: Mapping[str, Any]):
+    """The ROS 2 messages that go with one rovlab message."""
+    if topic == "/rovlab/truth":
+        yield "/rovlab/odometry/truth", ros2msg.odometry(stamp, msg["state"])
+    elif topic == "/rovlab/estimate":
+        yield "/rovlab/odometry/estimate", ros2msg.odometry(stamp, msg["state"], msg.get("variance"))
+    elif topic == "/rovlab/command" and msg.get("tau"):
+        yield "/rovlab/wrench", ros2msg.wrench_stamped(stamp, msg["tau"])

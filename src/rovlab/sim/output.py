@@ -70,7 +70,8 @@ def write_run(out_dir: str | Path, result: SimResult, metrics: Mapping[str, Any]
     if mcap:
         try:
             written["timeseries.mcap"] = write_mcap(out / "timeseries.mcap", cols, metadata={
-                "scenario": result.scenario.name, "seed": str(result.scenario.seed)})
+                "scenario": result.scenario.name, "seed": str(result.scenario.seed)},
+                start_time_s=result.meta.get("start_time_unix_s"))
         except RuntimeError as exc:
             notes.append(str(exc))
     figs: list[Path] = []

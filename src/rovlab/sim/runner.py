@@ -14,6 +14,7 @@ passes in: there is no hidden cache in this module.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
@@ -465,8 +466,11 @@ class SimResult:
 
 def run_prepared(prep: Prepared) -> SimResult:
     """Run a prepared scenario from its start to its end."""
+    started = time.time()
     logs = Simulation(prep).advance(prep.drive)
-    return _result(prep, logs)
+    result = _result(prep, logs)
+    result.meta["start_time_unix_s"] = started  # wall clock of the run's start (log times)
+    return result
 
 
 def _result(prep: Prepared, logs: Logs) -> SimResult:

@@ -41,6 +41,7 @@ class Run:
 
     def __init__(self) -> None:
         self.columns: dict[str, array] = {"time_s": array("d")}
+        self.started = time.time()  # wall-clock start of the run (MCAP log times)
         self.rows = 0
         self._row: dict[str, float] | None = None
         self._t: float | None = None
@@ -160,7 +161,7 @@ class SessionLog:
                     written.append(path)
                 elif fmt == "mcap":
                     meta = {"run": str(i), **(metadata or {})}
-                    written.append(write_mcap(path, cols, metadata=meta))
+                    written.append(write_mcap(path, cols, metadata=meta, start_time_s=run.started))
                 else:
                     raise ValueError(f"unknown log format {fmt!r}; expected csv or mcap")
         if self.events or written:
