@@ -142,24 +142,32 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
     fig.tight_layout()
     paths.append(_save(fig, out / "biases.png", plt))
 
-    # 4. control forces and thruster commands
-    fig, axes = plt.subplots(2, 1, figsize=(12, 6), sharex=True)
-    _shade(axes[0], windows)
-    for s, unit in (("Z", "N"), ("N", "N m")):
-        c = _col(columns, f"tau_{s}")
-        if c is not None:
-            axes[0].plot(t, c, lw=1.0, label=f"tau_{s} [{unit}]")
-    axes[0].set_ylabel("control force")
-    axes[0].grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
-    _shade(axes[1], windows)
+    # 4. control forces (one axis per unit) and thruster commands
+    wrench = [(s, unit) for s, unit in (("X", "N"), ("Y", "N"), ("Z", "N"), ("N", "N m"))
+              if _col(columns, f"tau_{s}") is not None]
+    fig, axes = plt.subplots(len(wrench) + 1, 1, figsize=(12, 2.4 * (len(wrench) + 1) + 0.6), sharex=True)
+    axes = np.atleast_1d(axes)
+    for ax, (s, unit) in zip(axes, wrench):
+        _shade(ax, windows)
+        ax.plot(t, _col(columns, f"tau_{s}"), lw=1.0, label=f"tau_{s} achieved")
+        demanded = _col(columns, f"tau_{s}_demanded")
+        if demanded is not None and not np.allclose(demanded, _col(columns, f"tau_{s}"), equal_nan=True):
+            ax.plot(t, demanded, lw=0.8, ls="--", label=f"tau_{s} demanded (saturated)")
+        ax.set_ylabel(f"tau_{s} [{unit}]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+    ax = axes[-1]
+    _shade(ax, windows)
+    # PWM commands as points: a thruster near zero thrust jumps across the ESC's dead band from
+    # step to step, which a line would draw as a solid block; the band itself is shaded
+    ax.axhspan(1500 - 25, 1500 + 25, color="tab:olive", alpha=0.15, lw=0, label="dead band (no thrust)")
     for name in columns:
         if name.startswith("pwm_"):
-            axes[1].step(t, _col(columns, name), where="post", lw=0.9, label=name[4:])
-    axes[1].set_ylabel("thruster command [us]")
-    axes[1].set_xlabel("time [s]")
-    axes[1].grid(alpha=0.3)
-    axes[1].legend(fontsize=7, ncol=4)
+            ax.plot(t, _col(columns, name), ".", ms=2.0, label=name[4:])
+    ax.set_ylabel("thruster command [us]")
+    ax.set_xlabel("time [s]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=4, loc="upper right", markerscale=3)
     fig.suptitle(f"{title}: control".strip(": "))
     fig.tight_layout()
     paths.append(_save(fig, out / "control.png", plt))
@@ -187,11 +195,13 @@ def write_nees_figure(path: str | Path, t: np.ndarray, nees_runs: np.ndarray, bo
     ok = np.isfinite(runs)
     count = ok.sum(axis=0)
     mean = np.where(count > 0, np.where(ok, runs, 0.0).sum(axis=0) / np.maximum(count, 1), np.nan)
+    lo, hi = float(bounds[0]), float(bounds[1])
+    ax.axhspan(lo, hi, color="tab:green", alpha=0.15, lw=0, label="95 % chi-square band of the average")
     ax.plot(t, mean, lw=1.0, label=f"average NEES over {nees_runs.shape[0]} runs")
     ax.axhline(dof, color="k", lw=0.8, label=f"expected ({dof})")
-    ax.axhline(bounds[0], color="tab:red", ls="--", lw=0.8, label="95 % chi-square bounds")
-    ax.axhline(bounds[1], color="tab:red", ls="--", lw=0.8)
-    ax.set_yscale("log")
+    finite = mean[np.isfinite(mean)]
+    top = max(2.0 * hi, float(np.percentile(finite, 99)) * 1.1 if finite.size else 0.0)
+    ax.set_ylim(0.0, top)  # linear: the band is what matters; start-up outliers may leave the top
     ax.set_xlabel("time [s]")
     ax.set_ylabel("NEES")
     ax.grid(alpha=0.3)
