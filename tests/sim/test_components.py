@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from rovlab.core.components import ControllerSpec, fresh, register_controller, restore, state_of
+from rovlab.core.components import ControllerSpec, fresh, register_controller, restore, state_fields, state_of
 from rovlab.io.logs import read_log
 from rovlab.params.design import design_config_from_dict, packaged_config_path
 from rovlab.params.validate import ConfigError, read_toml
@@ -30,8 +30,6 @@ class HoldDepth(NamedTuple):
     h: float
     state: np.ndarray  # [integral of the depth error]
 
-    STATE = ("state",)
-
 
 @njit(cache=False)
 def _hold_step(ctrl, t, nav, ref, tau):
@@ -43,7 +41,7 @@ def _hold_step(ctrl, t, nav, ref, tau):
     tau[3] = 0.0
 
 
-register_controller(HoldDepth, step=_hold_step)
+register_controller(HoldDepth, state=("state",), step=_hold_step)
 
 
 def _build_hold(vehicle, config):
@@ -105,7 +103,7 @@ def test_state_is_a_value_that_can_be_saved_and_restored():
     saved = {slot: state_of(c) for slot, c in sim.components().items()}
     first = sim.advance(chunk(n, 2 * n))
     for slot, comp in sim.components().items():  # rewind and run the same chunk again
-        assert restore(comp, saved[slot]) == list(type(comp).STATE)
+        assert restore(comp, saved[slot]) == list(state_fields(comp))
     sim.k = n
     again = sim.advance(chunk(n, 2 * n))
     np.testing.assert_array_equal(first.x, again.x)

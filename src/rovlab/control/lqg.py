@@ -78,8 +78,6 @@ class LQG(NamedTuple):
     u2: np.ndarray  # (2) work: [Z, N]
     state: np.ndarray  # (0)
 
-    STATE = ("state",)
-
 
 _FROM_NAV = (2, 3, 6, 7, 10, 11)  # z, psi, w, r, b_Z, b_N in rovlab.core.components.TRUTH
 
@@ -97,7 +95,7 @@ def _lqg_step(ctrl, t, nav, ref, tau):
     tau[3] = ctrl.u2[1]
 
 
-register_controller(LQG, step=_lqg_step)
+register_controller(LQG, state=("state",), step=_lqg_step)
 
 
 def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:

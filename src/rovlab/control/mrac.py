@@ -142,8 +142,6 @@ class MRAC(NamedTuple):
     state: np.ndarray  # (6): M_hat, D_l_hat, D_q_hat, F_hat, z_m, w_m
     started: np.ndarray  # (1): 0 until the reference model has been set to the first estimate
 
-    STATE = ("state", "started")
-
 
 _FROM_NAV = (2, 3, 6, 7, 10, 11)  # z, psi, w, r, b_Z, b_N in rovlab.core.components.TRUTH
 
@@ -185,7 +183,7 @@ def _mrac_actuated(ctrl, t, tau_demanded, tau_achieved):
     st[_IWM] = ctrl.Phi_m[1, 0] * zm + ctrl.Phi_m[1, 1] * wm + ctrl.G_m[1, 0] * r + ctrl.G_m[1, 1] * nu_h
 
 
-register_controller(MRAC, step=_mrac_step, actuated=_mrac_actuated)
+register_controller(MRAC, state=("state", "started"), step=_mrac_step, actuated=_mrac_actuated)
 
 
 # --------------------------------------------------------------------------------------------

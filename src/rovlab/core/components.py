@@ -8,9 +8,9 @@ The simulator's compiled loop (:mod:`rovlab.sim.loop`) runs, at every control sa
 and calls each component only through the slot functions below. A **component** is a
 ``typing.NamedTuple`` of numpy arrays and scalars: its constants (gains, packed models, sizes
 taken from its model) and its state (covariance, channel states, integrators, adaptive
-parameters) as arrays that the kernels update in place. The class lists its state fields in a
-class attribute ``STATE`` (a tuple of field names), so a caller can copy, save and restore the
-state of any component without knowing what it is (:func:`fresh`, :func:`state_of`,
+parameters) as arrays that the kernels update in place. Its registration names its state
+fields (``state=(...)``), so a caller can copy, save and restore the state of any component
+without knowing what it is (:func:`state_fields`, :func:`fresh`, :func:`state_of`,
 :func:`restore`).
 
 Slot functions (all compiled; the arrays are float64 unless noted):
@@ -43,7 +43,7 @@ those and nothing else, and is cached on disk per combination.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable
 
 import numpy as np
 from numba.core import types
@@ -60,6 +60,8 @@ ANGLES = frozenset({"psi"})
 REFERENCE = ("x", "y", "z", "psi")
 WRENCH = ("X", "Y", "Z", "N")
 
+_STATE: dict[type, tuple[str, ...]] = {}  # component class -> its state fields
+_DRAWS: dict[type, int] = {}  # plant class -> standard normal draws per integration step
 _REGISTRY: dict[str, dict[type, Callable[..., Any]]] = {
     "plant_truth": {}, "plant_advance": {},
     "estimator_correct": {}, "estimator_predict": {},
@@ -67,36 +69,41 @@ _REGISTRY: dict[str, dict[type, Callable[..., Any]]] = {
 }
 
 
-def _check_class(cls: type) -> None:
-    if not (isinstance(cls, type) and issubclass(cls, tuple) and hasattr(cls, "_fields")):
+def _fields(cls: type) -> tuple[str, ...]:
+    fields = getattr(cls, "_fields", None)
+    if not (isinstance(cls, type) and issubclass(cls, tuple) and isinstance(fields, tuple)):
         raise TypeError(f"{cls!r} is not a NamedTuple class")
-    state = getattr(cls, "STATE", None)
-    if not isinstance(state, tuple) or any(s not in cls._fields for s in state):
-        raise TypeError(f"{cls.__name__}.STATE must be a tuple of its field names")
+    return fields
 
 
-def register_plant(cls: type, *, truth: Callable, advance: Callable) -> None:
-    """Bind a plant class: truth(plant, truth), advance(plant, drive, row, tau_cmd, tau_real)."""
-    _check_class(cls)
+def _register_state(cls: type, state: tuple[str, ...], required: tuple[str, ...]) -> None:
+    fields = _fields(cls)
+    for f in (*state, *required):
+        if f not in fields:
+            raise TypeError(f"{cls.__name__} has no field {f!r} (its fields: {', '.join(fields)})")
+    _STATE[cls] = tuple(state)
+
+
+def register_plant(cls: type, *, state: tuple[str, ...], draws: int, truth: Callable, advance: Callable) -> None:
+    """Bind a plant class: truth(plant, truth), advance(plant, drive, row, tau_cmd, tau_real);
+    ``draws`` standard normal numbers per integration step come in drive.plant_normals."""
+    _register_state(cls, state, ())
+    _DRAWS[cls] = int(draws)
     _REGISTRY["plant_truth"][cls] = truth
     _REGISTRY["plant_advance"][cls] = advance
 
 
-def register_estimator(cls: type, *, correct: Callable, predict: Callable) -> None:
+def register_estimator(cls: type, *, state: tuple[str, ...], correct: Callable, predict: Callable) -> None:
     """Bind an estimator class: correct(est, t, y, present, rep), predict(est, t, tau)."""
-    _check_class(cls)
-    for f in ("x", "P", "ch"):
-        if f not in cls._fields:
-            raise TypeError(f"an estimator needs the field {f!r}; {cls.__name__} has {cls._fields}")
+    _register_state(cls, state, ("x", "P", "ch"))
     _REGISTRY["estimator_correct"][cls] = correct
     _REGISTRY["estimator_predict"][cls] = predict
 
 
-def register_controller(cls: type, *, step: Callable, actuated: Callable | None = None) -> None:
+def register_controller(cls: type, *, state: tuple[str, ...], step: Callable,
+                        actuated: Callable | None = None) -> None:
     """Bind a controller class: step(ctrl, t, nav, ref, tau), actuated(ctrl, t, tau_d, tau_a)."""
-    _check_class(cls)
-    if "state" not in cls._fields:
-        raise TypeError(f"a controller needs the field 'state'; {cls.__name__} has {cls._fields}")
+    _register_state(cls, state, ("state",))
     _REGISTRY["controller_step"][cls] = step
     _REGISTRY["controller_actuated"][cls] = actuated if actuated is not None else _no_actuated
 
@@ -109,22 +116,34 @@ def _no_actuated(ctrl, t, tau_demanded, tau_achieved):  # pragma: no cover - com
 # Copying state without knowing the component
 # --------------------------------------------------------------------------------------------
 
-def fresh(component: NamedTuple) -> NamedTuple:
+def state_fields(component: Any) -> tuple[str, ...]:
+    """The names of a registered component's state fields."""
+    try:
+        return _STATE[type(component)]
+    except KeyError:
+        raise TypeError(f"{type(component).__name__} is not a registered component") from None
+
+
+def plant_draws(plant: Any) -> int:
+    """Standard normal draws per integration step that a registered plant takes."""
+    return _DRAWS[type(plant)]
+
+
+def fresh(component: Any) -> Any:
     """The component with its own copies of its state arrays (the constants are shared)."""
-    return component._replace(**{f: np.array(getattr(component, f), copy=True)
-                                 for f in component.STATE})  # type: ignore[attr-defined]
+    return component._replace(**{f: np.array(getattr(component, f), copy=True) for f in state_fields(component)})
 
 
-def state_of(component: NamedTuple) -> dict[str, np.ndarray]:
+def state_of(component: Any) -> dict[str, np.ndarray]:
     """A copy of the component's state, by field name."""
-    return {f: np.array(getattr(component, f), copy=True) for f in component.STATE}  # type: ignore[attr-defined]
+    return {f: np.array(getattr(component, f), copy=True) for f in state_fields(component)}
 
 
-def restore(component: NamedTuple, state: dict[str, np.ndarray]) -> list[str]:
+def restore(component: Any, state: dict[str, np.ndarray]) -> list[str]:
     """Copy saved state into the component where the field exists and the shape matches;
     returns the fields that were restored."""
     done = []
-    for f in component.STATE:  # type: ignore[attr-defined]
+    for f in state_fields(component):
         if f in state:
             target = getattr(component, f)
             src = np.asarray(state[f])
@@ -170,37 +189,37 @@ def _lookup(slot: str, comp_type) -> Callable:
                       f"(rovlab.core.components.register_*)")
 
 
-@overload(plant_truth, inline="always", jit_options={"cache": True})
+@overload(plant_truth, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
 def _ol_plant_truth(plant, truth):
     fn = _lookup("plant_truth", plant)
     return lambda plant, truth: fn(plant, truth)
 
 
-@overload(plant_advance, inline="always", jit_options={"cache": True})
+@overload(plant_advance, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
 def _ol_plant_advance(plant, drive, row, tau_cmd, tau_real):
     fn = _lookup("plant_advance", plant)
     return lambda plant, drive, row, tau_cmd, tau_real: fn(plant, drive, row, tau_cmd, tau_real)
 
 
-@overload(estimator_correct, inline="always", jit_options={"cache": True})
+@overload(estimator_correct, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
 def _ol_estimator_correct(est, t, y, present, rep):
     fn = _lookup("estimator_correct", est)
     return lambda est, t, y, present, rep: fn(est, t, y, present, rep)
 
 
-@overload(estimator_predict, inline="always", jit_options={"cache": True})
+@overload(estimator_predict, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
 def _ol_estimator_predict(est, t, tau):
     fn = _lookup("estimator_predict", est)
     return lambda est, t, tau: fn(est, t, tau)
 
 
-@overload(controller_step, inline="always", jit_options={"cache": True})
+@overload(controller_step, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
 def _ol_controller_step(ctrl, t, nav, ref, tau):
     fn = _lookup("controller_step", ctrl)
     return lambda ctrl, t, nav, ref, tau: fn(ctrl, t, nav, ref, tau)
 
 
-@overload(controller_actuated, inline="always", jit_options={"cache": True})
+@overload(controller_actuated, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
 def _ol_controller_actuated(ctrl, t, tau_demanded, tau_achieved):
     fn = _lookup("controller_actuated", ctrl)
     if fn is _no_actuated:

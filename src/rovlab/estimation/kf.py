@@ -42,8 +42,6 @@ class KalmanFilter(NamedTuple):
     u: np.ndarray  # (p) work
     work: np.ndarray  # kernel scratch
 
-    STATE = ("x", "P", "ch")
-
 
 @njit(cache=True, inline="always")
 def _correct(est, t, y, present, rep):
@@ -57,7 +55,7 @@ def _predict(est, t, tau):
     predict_arrays(est.x, est.P, est.Delta, est.Q, est.wrap, est.sp, est.u, est.work)
 
 
-register_estimator(KalmanFilter, correct=_correct, predict=_predict)
+register_estimator(KalmanFilter, state=("x", "P", "ch"), correct=_correct, predict=_predict)
 
 
 def from_model(fm: FilterModel) -> KalmanFilter:

@@ -140,7 +140,7 @@ def unobservable_subspace(A: np.ndarray, H: np.ndarray, *, rtol: float = 1e-9) -
     V = null_space(H, rcond=rtol) if H.size else np.eye(n)
     while V.shape[1] > 0:
         C = A @ V - V @ (V.T @ A @ V)  # the part of A V leaving span V
-        scale = max(np.linalg.norm(A, 2), 1.0)
+        scale = max(float(np.linalg.norm(A, 2)), 1.0)
         N = null_space(C, rcond=rtol) if np.linalg.norm(C) > rtol * scale else np.eye(V.shape[1])
         if N.shape[1] == V.shape[1]:
             break

@@ -79,7 +79,8 @@ def write_lab_data(path: str | Path, data: LabData) -> Path:
 
 def new_seed() -> int:
     """A fresh seed to record (so the run can be replayed)."""
-    return int(np.random.SeedSequence().entropy % (2**32))
+    entropy = np.random.SeedSequence().entropy
+    return int(entropy) % (2**32)  # type: ignore[arg-type]  # an int for a fresh SeedSequence
 
 
 MAX_ROWS = 2_000_000  # more rows than this is a typo (and a long wait), not an experiment
@@ -177,14 +178,14 @@ def thrust_rig(vehicle: Vehicle, thrusters: Sequence[str] | str | None = None, *
     t = h * np.arange(setpoint.size)
     neutral = vehicle.thruster(names[0]).pwm_neutral_us
     command = _first_order(setpoint, h, command_tau_s, y0=neutral)
-    force = sum(thrust_curve_of(vehicle, n, command) for n in names)
+    force: np.ndarray = np.sum([thrust_curve_of(vehicle, n, command) for n in names], axis=0)
     cell = _first_order(force, h, cell_tau_s, y0=0.0) + noise_std_n * rng.standard_normal(t.size)
     truth: dict[str, float] = {}
     thr = vehicle.thruster(names[0])
     if thr.model == "quadratic" and thr.curve is not None:
         truth = {"K_L_pos": thr.curve.K_L_pos, "K_NL_pos": thr.curve.K_NL_pos, "K_L_neg": thr.curve.K_L_neg,
                  "K_NL_neg": thr.curve.K_NL_neg, "deadband_us": thr.deadband_us}
-    notes = () if truth else (f"{thr.name} is tabulated ({thr.table} at {thr.voltage:g} V): the truth is the table, "
+    notes: tuple[str, ...] = () if truth else (f"{thr.name} is tabulated ({thr.table} at {thr.voltage:g} V): the truth is the table, "
                               "not a quadratic curve",)
     if len(names) > 1:
         notes += (f"{len(names)} thrusters on the rig together ({', '.join(names)}): identify with --pair {len(names)}",)
@@ -210,8 +211,9 @@ def thrust_rig(vehicle: Vehicle, thrusters: Sequence[str] | str | None = None, *
 DEFAULT_SPEEDS = (0.1, -0.1, 0.2, -0.2, 0.3, -0.3, 0.4, -0.4, 0.5, -0.5)
 
 
-def _carriage_profile(speed: float, h: float, rest_s: float, accel: float, hold_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Speed and acceleration of one run: rest, ramp, hold, ramp down, rest."""
+def _carriage_profile(speed: float, h: float, rest_s: float, accel: float,
+                      hold_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Time, speed and acceleration of one run: rest, ramp, hold, ramp down, rest."""
     ramp_s = abs(speed) / accel
     total = rest_s + ramp_s + hold_s + ramp_s + rest_s
     t = h * np.arange(int(round(total / h)) + 1)

@@ -69,7 +69,7 @@ class NoiseEstimate:
             "samples": int(self.time_s.size), "rate_hz": self.rate_hz, "detrend_degree": self.detrend_degree,
         }
         if any(c.allan_dev is not None for c in self.channels.values()):
-            out["allan"] = {k: {"tau_s": c.allan_tau_s.tolist(), "adev": c.allan_dev.tolist()}
+            out["allan"] = {k: {"tau_s": np.asarray(c.allan_tau_s).tolist(), "adev": np.asarray(c.allan_dev).tolist()}
                             for k, c in self.channels.items() if c.allan_dev is not None}
         return out
 

@@ -286,6 +286,7 @@ def read_thrust_table(path: str | Path) -> tuple[np.ndarray, np.ndarray, str]:
     table = read_table(path, what="thrust table")
     cols = {c.lower().replace(" ", ""): c for c in table.columns}
     pwm_col = cols.get("pwm_us") or next((c for k, c in cols.items() if k.startswith("pwm")), None)
+    force_col: str | None
     if "force_n" in cols:
         force_col, scale, fmt = cols["force_n"], 1.0, "pwm_us, force_n"
     elif "force_kgf" in cols:

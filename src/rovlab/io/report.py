@@ -42,6 +42,11 @@ def _col(columns: Mapping[str, np.ndarray], name: str) -> np.ndarray | None:
     return np.asarray(columns[name], dtype=float) if name in columns else None
 
 
+def _has(columns: Mapping[str, np.ndarray], name: str) -> np.ndarray:
+    """A column known to be there (float)."""
+    return np.asarray(columns[name], dtype=float)
+
+
 def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> list[Path]:
     """Write the run's figures into out_dir; returns their paths."""
     plt = _plt()
@@ -65,7 +70,7 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
             lines.append(true * k)
         for name in columns:
             if name.startswith(f"meas_{s}_"):
-                m = _col(columns, name)
+                m = _has(columns, name)
                 off = float(offsets.get(name, 0.0))
                 ok = np.isfinite(m)
                 sensor = name[len(f"meas_{s}_"):]
@@ -151,7 +156,7 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
         _shade(ax, windows)
         ax.plot(t, _col(columns, f"tau_{s}"), lw=1.0, label=f"tau_{s} achieved")
         demanded = _col(columns, f"tau_{s}_demanded")
-        if demanded is not None and not np.allclose(demanded, _col(columns, f"tau_{s}"), equal_nan=True):
+        if demanded is not None and not np.allclose(demanded, _has(columns, f"tau_{s}"), equal_nan=True):
             ax.plot(t, demanded, lw=0.8, ls="--", label=f"tau_{s} demanded (saturated)")
         ax.set_ylabel(f"tau_{s} [{unit}]")
         ax.grid(alpha=0.3)

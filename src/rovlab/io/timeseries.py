@@ -33,10 +33,11 @@ def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata:
         from mcap.writer import CompressionType, Writer
     except ImportError as exc:  # pragma: no cover - optional extra
         raise RuntimeError("writing MCAP needs the 'mcap' package: pip install 'rovlab[log]'") from exc
+    serialize_dynamic: Any = None
     try:  # the CDR encoder of mcap-ros2-support (what its own Writer uses)
         from mcap_ros2._dynamic import serialize_dynamic
     except ImportError:  # pragma: no cover - optional extra
-        serialize_dynamic = None
+        pass
     t0_ns = int(round((time.time() if start_time_s is None else float(start_time_s)) * 1e9))
     path = Path(path)
     with atomic_open(path, "wb") as fh:

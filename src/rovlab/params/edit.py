@@ -106,6 +106,7 @@ def format_float(x: float) -> str:
 def _item(value: Any, old: Any = None) -> Any:
     """A tomlkit item for a plain value, keeping the old item's trailing comment."""
     trivia = old.trivia if isinstance(old, items.Item) and not isinstance(old, (items.Table, items.AoT)) else None
+    new: Any
     if isinstance(value, bool):
         new = tomlkit.item(value)
     elif isinstance(value, int):

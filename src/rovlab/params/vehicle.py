@@ -165,8 +165,9 @@ class Vehicle:
 
     def with_updates(self, **changes: Any) -> "Vehicle":
         """A copy with some fields replaced (arrays are copied and frozen)."""
-        fixed = {k: _frozen(v) if isinstance(v, (list, tuple, np.ndarray)) and k not in ("thrusters", "sensors") else v
-                 for k, v in changes.items()}
+        fixed: dict[str, Any] = {
+            k: _frozen(v) if isinstance(v, (list, tuple, np.ndarray)) and k not in ("thrusters", "sensors") else v
+            for k, v in changes.items()}
         return replace(self, **fixed)
 
 

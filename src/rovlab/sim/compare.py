@@ -138,8 +138,8 @@ def compare(data: Mapping[str, Any], file: str, controllers: Sequence[str], seed
         for ctl in controllers:
             prep = prepare(replace(sc, controller=ctl), book=book)
             if refmodel is None:
-                m = prep.config.mrac
-                refmodel = (m.bandwidth, m.damping)
+                mc = prep.config.mrac
+                refmodel = (mc.bandwidth, mc.damping)
             model = prep.design.controller.model
             bounds = (model.lo, model.hi) if hasattr(model, "lo") and hasattr(model, "hi") else None
             if bounds is not None and ctl not in bounds_of:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from rovlab.core.components import restore, state_of
+from rovlab.core.components import plant_draws, restore, state_of
 from rovlab.estimation.fusion import CH_MODE, MODE_AUTO, MODE_OFF, MODE_ON, new_channel_state
 from rovlab.io.messages import row_messages
 from rovlab.params.design import DesignConfig
@@ -170,12 +170,13 @@ class LiveSimulation:
         else:
             refs[:, 2], refs[:, 3] = self.reference
         n_sub = prep.plant.n_sub
-        normals = draw(self.rng, n, n_sub, type(prep.plant).DRAWS, len(prep.channels))
+        normals = draw(self.rng, n, n_sub, plant_draws(prep.plant), len(prep.channels))
         heave, pset = disturbances(self.scenario, times, observer=self.scenario.plant == "observer",
                                    g=prep.truth.gravity)
-        logs = self.sim.advance(Drive(*normals, dropout, refs, heave, pset))
+        plant_n, bias_n, sensor_n = normals
+        logs = self.sim.advance(Drive(plant_n, bias_n, sensor_n, dropout, refs, heave, pset))
         cols = columns(prep, logs, times, refs)
-        out = []
+        out: list[tuple[str, float, dict[str, Any]]] = []
         for i in range(n):
             out.extend(row_messages(cols, i))
         self.last_columns = cols

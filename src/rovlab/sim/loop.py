@@ -46,7 +46,7 @@ _DIVERGED = 1e9  # a true state beyond this (or not finite) means the plant has 
 class Drive(NamedTuple):
     """Everything exogenous to the loop for rows 0 .. n-1 of a chunk."""
 
-    plant_normals: np.ndarray  # (n * n_sub, plant's DRAWS) float32: plant noise per integration step
+    plant_normals: np.ndarray  # (n * n_sub, the plant's draws per step) float32: plant noise per integration step
     bias_normals: np.ndarray  # (n, 4): Gauss-Markov bias drivers
     sensor_normals: np.ndarray  # (n, m): measurement noise
     dropout: np.ndarray  # (n, m) bool: no sample from channel j at row i
@@ -76,9 +76,10 @@ def new_logs(n: int, m: int, n_x: int, n_thrusters: int, n_ctrl_state: int) -> L
                 np.empty((n, 3)), np.empty((n, n_ctrl_state)))
 
 
-def draw(rng: np.random.Generator, n: int, n_sub: int, plant_draws: int, m: int) -> tuple[np.ndarray, ...]:
+def draw(rng: np.random.Generator, n: int, n_sub: int, plant_draws: int,
+         m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The random inputs of n control steps, in a fixed order: plant noise (single precision),
-    bias drivers, sensor noise. One chunk of N steps draws exactly what N chunks of one step do."""
+    bias drivers, sensor noise (so a run drawn in one chunk is reproduced from its seed alone)."""
     plant = rng.standard_normal((n * n_sub, plant_draws), dtype=np.float32)
     bias = rng.standard_normal((n, 4))
     sensors = rng.standard_normal((n, m))

@@ -43,6 +43,7 @@ def step_response(t: np.ndarray, y: np.ndarray, t_step: float, y0: float, y1: fl
     step = wrap(y1 - y0) if angle else y1 - y0
     out: dict[str, Any] = {"t_s": float(t_step), "from": float(y0), "to": float(y1),
                            "settling_time_s": None, "overshoot": None}
+    step = float(step)
     if tt.size == 0 or step == 0:
         return out
     err = wrap(yy - y1) if angle else yy - y1

@@ -48,8 +48,6 @@ class ProcessPlant(NamedTuple):
     p_sets: np.ndarray  # (n_sets, P_SIZE): the parameters after each truth event (row 0 = p)
     dist: np.ndarray  # (2): parameter set and extra heave force [N] of the last step
 
-    STATE = ("x", "bias", "dist")
-    DRAWS = 4  # standard normal draws per RK4 step
 
 
 class ObserverPlant(NamedTuple):
@@ -64,8 +62,6 @@ class ObserverPlant(NamedTuple):
     u: np.ndarray  # (2) work
     dist: np.ndarray  # (1): extra heave force [N] of the last step (events, tether)
 
-    STATE = ("x", "dist")
-    DRAWS = 6
 
 
 @njit(cache=True, inline="always")
@@ -155,5 +151,5 @@ def _observer_step(plant, drive, row, tau_cmd, tau_real):
                    drive.plant_normals[row * n:(row + 1) * n], plant.tmp)
 
 
-register_plant(ProcessPlant, truth=_process_truth, advance=_process_step)
-register_plant(ObserverPlant, truth=_observer_truth, advance=_observer_step)
+register_plant(ProcessPlant, state=("x", "bias", "dist"), draws=4, truth=_process_truth, advance=_process_step)
+register_plant(ObserverPlant, state=("x", "dist"), draws=6, truth=_observer_truth, advance=_observer_step)

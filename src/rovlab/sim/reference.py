@@ -10,6 +10,8 @@ the saturation-aware allocation.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rovlab.core.angles import wrap_angle as _wrap
@@ -28,9 +30,10 @@ def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) 
     n_sub = plant.n_sub
     n = prep.n_ctrl if steps is None else steps
     observer = isinstance(plant, ObserverPlant)
-    xo = plant.x.copy() if observer else None
-    xp = None if observer else plant.x.copy()
-    bias = np.zeros(4) if observer or not noise else plant.bias.copy()
+    obs: Any = plant  # one of the two plants; the branches below read only that one's fields
+    xo = plant.x.copy()
+    xp = plant.x.copy()
+    bias = np.zeros(4) if observer or not noise else obs.bias.copy()
     x = fm.x0.astype(float).copy()
     P = fm.P0.astype(float).copy()
     quantity = {2: 0, 3: 1, 6: 2, 7: 3}  # TRUTH index -> index in [z, psi, w, r]
@@ -38,7 +41,7 @@ def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) 
     H, R = fm.H, fm.R
     offsets = np.array([c.offset for c in fm.channels])
     angle = np.array([c.angle for c in fm.channels])
-    logs = {k: [] for k in ("true", "x", "P", "u", "pwm", "y")}
+    logs: dict[str, list[np.ndarray]] = {k: [] for k in ("true", "x", "P", "u", "pwm", "y")}
     for k in range(n):
         truth = np.array([xo[0], _wrap(xo[1]), xo[2], xo[3]]) if observer else \
             np.array([xp[2], _wrap(xp[3]), xp[6], xp[7]])
@@ -84,14 +87,14 @@ def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) 
         # plant
         if observer:
             for s in range(n_sub):
-                w = plant.L @ drive.plant_normals[k * n_sub + s] if noise else 0.0
-                xo = plant.Phi @ xo + plant.Delta @ u + w
+                w = obs.L @ drive.plant_normals[k * n_sub + s] if noise else 0.0
+                xo = obs.Phi @ xo + obs.Delta @ u + w
         else:
             real = alloc.B @ bank.force(pwm)
             tau = np.array([real[0], real[1], real[2], real[5]]) + bias
             for s in range(n_sub):
-                w = plant.noise_std * drive.plant_normals[k * n_sub + s] if noise else 0.0
-                xp = kin.rk4_step(plant.p, xp, tau + w, np.zeros(4), plant.h)
+                w = obs.noise_std * drive.plant_normals[k * n_sub + s] if noise else 0.0
+                xp = kin.rk4_step(obs.p, xp, tau + w, np.zeros(4), obs.h)
             if noise:
-                bias = plant.bias_phi * bias + plant.bias_std * drive.bias_normals[k]
+                bias = obs.bias_phi * bias + obs.bias_std * drive.bias_normals[k]
     return {k: np.array(v) for k, v in logs.items()}

@@ -23,6 +23,7 @@ import numpy as np
 
 from rovlab.allocation.solvers import Allocator
 from rovlab.core.components import (
+    plant_draws,
     TRUTH_INDEX, ControllerSpec, EstimatorSpec, fresh,
 )
 from rovlab.models import kinetics as kin
@@ -85,8 +86,8 @@ def check_heave_capacity(ctl: ControllerSpec, alloc: Allocator, where: str) -> N
     need = getattr(ctl.model, "heave_force_needed", None)
     if need is None:
         return
-    down_cap = float(alloc.allocate([0.0, 0.0, 1e6, 0.0]).achieved[2])
-    up_cap = float(alloc.allocate([0.0, 0.0, -1e6, 0.0]).achieved[2])
+    down_cap = float(alloc.allocate(np.array([0.0, 0.0, 1e6, 0.0])).achieved[2])
+    up_cap = float(alloc.allocate(np.array([0.0, 0.0, -1e6, 0.0])).achieved[2])
     down, up = float(need[0]), float(need[1])
     if down > down_cap or up < up_cap:
         cfg = ctl.model.config
@@ -200,8 +201,9 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     # plant: initial state, then every draw of the run in a fixed order (rovlab.sim.loop.draw)
     bias0 = sc.bias_std * rng.standard_normal(4)  # start in the stationary distribution
     plant = make_plant(design, sc, truth, n_sub, bias0)
-    normals = draw(rng, n_ctrl, n_sub, type(plant).DRAWS, len(est.channels))
-    drive = Drive(*normals, dropout, refs, heave, pset)
+    normals = draw(rng, n_ctrl, n_sub, plant_draws(plant), len(est.channels))
+    plant_n, bias_n, sensor_n = normals
+    drive = Drive(plant_n, bias_n, sensor_n, dropout, refs, heave, pset)
 
     alloc = design.allocator
     same = truth.thrusters is vehicle.thrusters

@@ -135,7 +135,7 @@ class SessionLog:
     def paths(self, formats: Iterable[str] = ("csv", "mcap")) -> list[Path]:
         """Files :meth:`write` would write now."""
         runs = [i for i, r in enumerate(self.runs, 1) if len(r)]
-        out = []
+        out: list[Path] = []
         for i in runs:
             name = self.stem if len(runs) == 1 and i == 1 else f"{self.stem}-run{i}"
             out.extend(self.folder / f"{name}.{fmt}" for fmt in formats)

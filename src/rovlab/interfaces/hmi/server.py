@@ -104,9 +104,9 @@ class PacingStats:
     compute time per control step (source + log), over the last ``keep`` batches."""
 
     def __init__(self, keep: int = 20000) -> None:
-        self.lag = deque(maxlen=keep)  # [s] wall-clock delay of a batch's last step behind its due time
-        self.step_time = deque(maxlen=keep)  # [s] compute time per control step
-        self.batch_size = deque(maxlen=keep)
+        self.lag: deque[float] = deque(maxlen=keep)  # [s] wall-clock delay of a batch's last step behind its due time
+        self.step_time: deque[float] = deque(maxlen=keep)  # [s] compute time per control step
+        self.batch_size: deque[int] = deque(maxlen=keep)
         self.steps = 0
         self.batches = 0
         self.slips = 0  # times the pacer fell > 1 s behind and re-anchored its clock
