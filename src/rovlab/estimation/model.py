@@ -15,19 +15,20 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import null_space, qr
-from scipy.stats import chi2
+from scipy.special import gammaincinv  # not scipy.stats: its import alone takes ~0.7 s
 
 from rovlab.estimation.discretise import discretise
-from rovlab.estimation.fusion import (
-    CFG_ANGLE, CFG_GATE, CFG_LOSE_AFTER, CFG_OFFSET, CFG_R, CFG_RAMP_FACTOR, CFG_RAMP_TIME,
-    CFG_REACQUIRE, CFG_STATE, CFG_TIMEOUT, N_CFG,
-)
 from rovlab.models.linear import HeaveYawParams, observer_model
 from rovlab.params.design import INPUTS, OBSERVER_STATES, DesignConfig
 from rovlab.params.validate import ConfigError, Problem
 from rovlab.params.vehicle import SENSOR_CHANNELS, Vehicle
 
 STATES = OBSERVER_STATES
+
+
+def _chi2_ppf_1dof(p: float) -> float:
+    """Quantile of the chi-square distribution with 1 degree of freedom (= scipy.stats.chi2.ppf)."""
+    return float(2.0 * gammaincinv(0.5, p))
 _STATE_OF_QUANTITY = {"z": 0, "psi": 1, "w": 2, "r": 3}
 _TIMEOUT_PERIODS = 5.0  # default timeout: this many sample periods of the sensor
 
@@ -90,6 +91,12 @@ class FilterModel:
 
     def channel_config(self) -> np.ndarray:
         """The m x N_CFG array the compiled kernels read (see rovlab.estimation.fusion)."""
+        # imported here: fusion imports numba, which ``rovlab design`` does not need
+        from rovlab.estimation.fusion import (
+            CFG_ANGLE, CFG_GATE, CFG_LOSE_AFTER, CFG_OFFSET, CFG_R, CFG_RAMP_FACTOR, CFG_RAMP_TIME,
+            CFG_REACQUIRE, CFG_STATE, CFG_TIMEOUT, N_CFG,
+        )
+
         cfg = np.zeros((len(self.channels), N_CFG))
         for j, c in enumerate(self.channels):
             cfg[j, CFG_OFFSET] = c.offset
@@ -222,7 +229,7 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
             name=name, column=f"{mc.quantity}_{sensor.name}", sensor=sensor.name, kind=sensor.kind,
             quantity=mc.quantity, state_index=_STATE_OF_QUANTITY[mc.quantity], offset=offset,
             variance=float(variance), timeout_s=float(timeout), gate_probability=f.gate_probability,
-            gate_threshold=float(chi2.ppf(f.gate_probability, 1)) if f.gate_probability < 1.0 else np.inf,
+            gate_threshold=_chi2_ppf_1dof(f.gate_probability) if f.gate_probability < 1.0 else np.inf,
             lose_after=f.gate_failures_to_lose, recovery_time_s=f.recovery_time_s,
             recovery_variance_factor=f.recovery_variance_factor, reacquire_after_s=f.reacquire_after_s,
         ))
