@@ -772,7 +772,11 @@ def plan_steps(dt: np.ndarray, h: float, *, tolerance: float = 0.25, max_steps: 
     ``max_steps``) or off the grid by more than ``tolerance``: bad.
     """
     dt = np.asarray(dt, dtype=float)
-    k = np.rint(dt / h)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _plan_steps(dt, np.rint(dt / h), h, tolerance, max_steps)
+
+
+def _plan_steps(dt, k, h, tolerance, max_steps):
     n = np.ones(dt.size, dtype=np.int64)
     restart = np.zeros(dt.size, dtype=bool)
     if max_steps is not None:

@@ -167,7 +167,7 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     lost = np.zeros(m, dtype=np.int64)
     gaps = 0
     n_rows = 0
-    t_first = t_last = math.nan
+    t_first = t_last = t_prev = math.nan
 
     def emit(writer: ChunkWriter, run) -> None:
         nonlocal n_rows
@@ -202,8 +202,9 @@ def _cmd_filter(args: argparse.Namespace) -> int:
                 u = np.column_stack([chunk.data[c] for c in INPUT_COLUMNS])
                 y = np.column_stack([chunk.data[c] for c in columns])
                 samples += np.count_nonzero(~np.isnan(y), axis=0)
-                dt = np.diff(t)
-                gaps += int(np.count_nonzero(dt > 1.5 * model.h))
+                dt = np.diff(np.concatenate([[t_prev], t]) if math.isfinite(t_prev) else t)
+                gaps += int(np.count_nonzero((dt > 1.5 * model.h) & (dt <= (args.max_gap_steps + 0.5) * model.h)))
+                t_prev = float(t[-1])
                 for run in runner.feed(t, u, y, final=nxt is None):
                     emit(writer, run)
                 chunk = nxt

@@ -22,7 +22,7 @@ import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Iterable, Iterator, Mapping, Sequence
+from typing import IO, Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -389,13 +389,16 @@ class LogStream:
             suspicious = np.zeros(table.num_rows, dtype=bool)
             for c in self.need:
                 col = table.column(c)
-                arr = col.to_numpy()
+                parts = [_float_array(chunk) for chunk in col.chunks]
+                arr = parts[0] if len(parts) == 1 else np.concatenate(parts)
                 values[c] = arr
                 if c == self.time_column:
                     suspicious |= ~np.isfinite(arr)
                 else:
                     # inf, or NaN spelt other than as a missing value: the careful scanner decides
-                    suspicious |= np.isinf(arr) | (np.isnan(arr) & ~col.is_null().to_numpy())
+                    if col.null_count != np.count_nonzero(np.isnan(arr)):
+                        suspicious |= np.isnan(arr)  # some NaN spelt otherwise than as a missing value
+                    suspicious |= np.isinf(arr)
             if suspicious.any():
                 return self._careful_block(data, line)
             t = values[self.time_column]
@@ -465,6 +468,26 @@ class LogStream:
         _raise(problems)
 
 
+def _string_array(pa, texts: Sequence[str]):
+    """A pyarrow string array built from its buffers (no pandas import)."""
+    data = [t.encode("utf-8") for t in texts]
+    offsets = np.zeros(len(data) + 1, dtype=np.int32)
+    np.cumsum([len(d) for d in data], out=offsets[1:])
+    return pa.Array.from_buffers(pa.string(), len(data), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(data))])
+
+
+def _float_array(chunk) -> np.ndarray:
+    """A pyarrow float64 array as numpy, nulls as NaN, read from its buffers (pyarrow's own
+    to_numpy imports pandas for arrays with nulls: 0.4 s)."""
+    n = len(chunk)
+    validity, data = chunk.buffers()[:2]
+    arr = np.frombuffer(data, dtype=np.float64, count=chunk.offset + n)[chunk.offset:]
+    if chunk.null_count:
+        bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
+        arr = np.where(bits[chunk.offset:chunk.offset + n].astype(bool), arr, np.nan)
+    return arr
+
+
 def _cell_value(file: str, number: int, column: str, text: str, is_time: bool,
                 problems: list[Problem]) -> float | None:
     """One cell of a wanted column (None = no value), or a problem appended."""
@@ -517,11 +540,14 @@ class ChunkWriter:
 
     Atomic like :func:`write_csv`: rows go to a temporary file renamed over ``target`` by
     :meth:`close`; :meth:`abort` (or an exception inside ``with``) removes it, so a refused or
-    interrupted run leaves no half-written output. ``-`` writes to standard output. pyarrow
-    formats the numbers when it is installed (the ``arrow`` extra), on a background thread (it
-    releases the GIL, so formatting overlaps the caller's next chunk; at most two chunks wait);
+    interrupted run leaves no half-written output. ``-`` writes to standard output. With pyarrow
+    (the ``arrow`` extra) chunks are rounded and formatted on a worker thread (pyarrow's writer
+    releases the GIL, so this overlaps the caller's next chunk; two workers measured no faster on
+    two cores and used more memory) and written in order, at most three chunks in flight;
     Python formats them otherwise.
     """
+
+    _IN_FLIGHT = 3
 
     def __init__(self, target: str | Path, names: Sequence[str], *, comments: Iterable[str] = (),
                  significant: int | None = None, exact: Iterable[str] = ()) -> None:
@@ -530,8 +556,8 @@ class ChunkWriter:
         self.significant = significant
         self.exact = set(exact)
         self._tmp: Path | None = None
-        self._thread = None
-        self._error: BaseException | None = None
+        self._pool = None
+        self._pending: list = []
         if self.target == "-":
             self._f = sys.stdout.buffer
         else:
@@ -547,50 +573,49 @@ class ChunkWriter:
         head = "".join(f"# {line}\n" for line in comments) + ",".join(_quote(n) for n in self.names) + "\n"
         self._f.write(head.encode("utf-8"))
         if self._pa is not None:
-            import queue
-            import threading
+            from concurrent.futures import ThreadPoolExecutor
 
-            self._queue: "queue.Queue" = queue.Queue(maxsize=2)
-            self._thread = threading.Thread(target=self._drain, name="rovlab-csv-writer", daemon=True)
-            self._thread.start()
-
-    def _drain(self) -> None:
-        options = self._pa.csv.WriteOptions(include_header=False, quoting_style="none")
-        while True:
-            table = self._queue.get()
-            if table is None:
-                return
-            if self._error is None:
-                try:
-                    self._pa.csv.write_csv(table, self._f, write_options=options)
-                except BaseException as exc:  # reported by the next write() or close()
-                    self._error = exc
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rovlab-csv")
 
     def _floats(self, name: str, col: np.ndarray) -> np.ndarray:
         if self.significant is not None and name not in self.exact:
             return round_significant(col, self.significant)
         return col
 
+    def _format(self, columns: Mapping[str, Any]) -> Any:
+        """One chunk as CSV bytes (a pyarrow buffer), on a worker thread."""
+        pa = self._pa
+        arrays = []
+        # arrays built from their buffers: pa.array() imports pandas (0.4 s) to inspect its input
+        for name in self.names:
+            col = columns[name]
+            if isinstance(col, tuple):
+                codes, labels = col
+                codes = np.ascontiguousarray(codes, dtype=np.int32)
+                index = pa.Array.from_buffers(pa.int32(), codes.size, [None, pa.py_buffer(codes)])
+                arrays.append(pa.DictionaryArray.from_arrays(index, _string_array(pa, labels)).cast(pa.string()))
+            elif isinstance(col, np.ndarray) and col.dtype.kind == "f":
+                col = np.ascontiguousarray(self._floats(name, col), dtype=np.float64)
+                nan = np.isnan(col)  # NaN -> null -> empty cell
+                nulls = int(np.count_nonzero(nan))
+                valid = pa.py_buffer(np.packbits(~nan, bitorder="little")) if nulls else None
+                arrays.append(pa.Array.from_buffers(pa.float64(), col.size, [valid, pa.py_buffer(col)],
+                                                    null_count=nulls))
+            else:
+                arrays.append(col if isinstance(col, pa.Array) else _string_array(pa, [str(v) for v in col]))
+        sink = pa.BufferOutputStream()
+        pa.csv.write_csv(pa.Table.from_arrays(arrays, names=self.names), sink,
+                         write_options=pa.csv.WriteOptions(include_header=False, quoting_style="none"))
+        return sink.getvalue()
+
     def write(self, columns: Mapping[str, np.ndarray | Sequence[str] | tuple[np.ndarray, Sequence[str]]]) -> None:
         """Append rows: each column a float array, a sequence of strings, or (codes, labels): the
-        label of each integer code (written without building one string per row)."""
-        self._check()
-        if self._pa is not None:
-            pa = self._pa
-            arrays = []
-            for name in self.names:
-                col = columns[name]
-                if isinstance(col, tuple):
-                    codes, labels = col
-                    arrays.append(pa.DictionaryArray.from_arrays(
-                        pa.array(np.asarray(codes, dtype=np.int32)), pa.array(list(labels))).cast(pa.string()))
-                elif isinstance(col, np.ndarray) and col.dtype.kind == "f":
-                    col = self._floats(name, col)
-                    nan = np.isnan(col)  # NaN -> null -> empty cell ('from_pandas' would import pandas)
-                    arrays.append(pa.array(col, mask=nan) if nan.any() else pa.array(col))
-                else:
-                    arrays.append(col if isinstance(col, pa.Array) else pa.array(col))
-            self._queue.put(pa.Table.from_arrays(arrays, names=self.names))
+        label of each integer code (written without building one string per row). The arrays
+        must not be modified afterwards (they may still be formatting)."""
+        if self._pool is not None:
+            self._pending.append(self._pool.submit(self._format, dict(columns)))
+            while len(self._pending) >= self._IN_FLIGHT:
+                self._f.write(self._pending.pop(0).result())
             return
         cols = []
         for name in self.names:
@@ -604,20 +629,21 @@ class ChunkWriter:
                 cols.append([str(v) for v in (col.tolist() if hasattr(col, "tolist") else col)])
         self._f.write("".join(",".join(row) + "\n" for row in zip(*cols)).encode("utf-8"))
 
-    def _check(self) -> None:
-        if self._error is not None:
-            error, self._error = self._error, None
-            raise error
-
-    def _stop(self) -> None:
-        if self._thread is not None:
-            self._queue.put(None)
-            self._thread.join()
-            self._thread = None
+    def _drain(self, keep: bool) -> None:
+        pending, self._pending = self._pending, []
+        try:
+            for future in pending:
+                if keep:
+                    self._f.write(future.result())
+                else:
+                    future.cancel()
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True, cancel_futures=not keep)
+                self._pool = None
 
     def close(self) -> None:
-        self._stop()
-        self._check()
+        self._drain(keep=True)
         if self._tmp is None:
             self._f.flush()
             return
@@ -626,9 +652,7 @@ class ChunkWriter:
         self._tmp = None
 
     def abort(self) -> None:
-        if self._thread is not None:
-            self._error = self._error or RuntimeError("aborted")  # the thread skips what is queued
-            self._stop()
+        self._drain(keep=False)
         if self._tmp is None:
             return
         self._f.close()
