@@ -93,25 +93,37 @@ def _cmd_design(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(info, indent=1))
         return 0
+    # SI units throughout (radians, never degrees): the same numbers as --json, labelled
     print(f"vehicle {vehicle.name}, configuration {config.name} ({config.file}); sample time {model.h:g} s")
-    print(f"  model: M_w = {p.M_w:.6g} kg, M_r = {p.M_r:.6g} kg m^2, Z_w = {p.Z_w:.6g}, N_r = {p.N_r:.6g}, "
-          f"T_w = {model.T_w:.6g} s, T_r = {model.T_r:.6g} s")
-    print("  measurements:")
+    print("  units: states z [m], psi [rad], w [m/s], r [rad/s], b_w [N], b_r [N m]; inputs Z [N], N [N m]")
+    print(f"  model: M_w = {p.M_w:.6g} kg, M_r = {p.M_r:.6g} kg m^2, Z_w = {p.Z_w:.6g} kg/s, "
+          f"N_r = {p.N_r:.6g} kg m^2/s")
+    print(f"    velocity time constants: heave M_w/-Z_w = {_ratio(p.M_w, -p.Z_w)}, "
+          f"yaw M_r/-N_r = {_ratio(p.M_r, -p.N_r)}")
+    print(f"  bias model (Gauss-Markov): time constants T_w = {model.T_w:.6g} s (b_w), T_r = {model.T_r:.6g} s (b_r)")
+    w = np.diag(model.W)
+    print("  process noise W = diag(" + ", ".join(f"{name} {v:.6g}" for name, v in zip(model.states, w)) + ")")
+    print("  measurements (variance in the channel's units squared: m^2 for z, rad^2 for psi):")
     for c in model.channels:
         gate = "off" if not np.isfinite(c.gate_threshold) else f"chi2 {c.gate_threshold:.3g}"
-        print(f"    {c.name:16s} column {c.column:14s} variance {c.variance:.6g}  l_z {c.offset:+.4g} m  "
+        unit = "rad^2" if c.angle else "m^2"
+        print(f"    {c.name:16s} column {c.column:14s} variance {c.variance:.6g} {unit}  l_z {c.offset:+.4g} m  "
               f"timeout {c.timeout_s:g} s  gate {gate}")
     if model.observable:
         print("  observable: yes")
     else:
         print(f"  observable: NO -- cannot estimate {', '.join(model.unobservable)} "
               f"({'; '.join(info['unobservable_directions'])})")
-    for name in ("Phi", "Delta", "Q"):
+    for name in ("Phi", "Delta", "Gamma", "Q", "H", "R"):
         _print_matrix(name, getattr(model, name))
-    _print_matrix("K (LQR)", lqr.K)
+    _print_matrix("K (LQR) on [z, psi, w, r]", lqr.K)
     _print_matrix(f"P (reference gain, {lqr.reference})", lqr.P)
     print(f"  |closed-loop poles| = {', '.join(f'{a:.4f}' for a in np.abs(lqr.poles))}")
     return 0
+
+
+def _ratio(a: float, b: float) -> str:
+    return f"{a / b:.6g} s" if b > 0 else "none (no damping)"
 
 
 def _print_matrix(name: str, M: np.ndarray) -> None:
