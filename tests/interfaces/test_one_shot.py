@@ -85,3 +85,11 @@ def test_unknown_command_and_top_level_help_still_list_every_command(capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "'filter'" in err and "'hmi'" in err
+
+
+def test_python_dash_m_reports_user_errors_without_traceback(tmp_path):
+    # as `python -m rovlab.interfaces.cli`, __main__ is a second copy of the module: its UserError
+    # class must not be the one main() catches
+    res = subprocess.run([sys.executable, "-m", "rovlab.interfaces.cli", "thruster", "--thruster", "T9", "--pwm", "1500"],
+                         capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert res.returncode == 2 and "Traceback" not in res.stderr and "T9" in res.stderr, res.stderr

@@ -81,4 +81,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # `python -m rovlab.interfaces.cli`: run the imported module's main, whose UserError is the
+    # class the sub-commands raise (this __main__ copy has its own, which would not catch it)
+    from rovlab.interfaces.cli import main as _main
+
+    sys.exit(_main())
