@@ -137,3 +137,15 @@ def test_round_significant_matches_printf():
     np.testing.assert_array_equal(round_significant(x, 10), expect)
     tiny = np.array([1.2345678901234e-20, np.inf, -np.inf, 0.0])  # beyond 1e+-22 scale: kept as they are
     np.testing.assert_array_equal(round_significant(tiny, 10), tiny)
+
+
+@pytest.mark.parametrize("cell, expected", [("1_000", "a number"), ("\uff11\uff12", "a number"),
+                                            ("1e400", "a finite number")])
+def test_lab_tables_refuse_the_same_numbers(tmp_path, cell, expected):
+    from rovlab.io.tables import read_table
+
+    path = tmp_path / "lab.csv"
+    path.write_text(f"time_s,force_n\n0,1\n0.1,{cell}\n", encoding="utf-8")
+    with pytest.raises(ConfigError) as err:
+        read_table(path)
+    assert f"line 3, column 'force_n': got '{cell}'; expected {expected}" in str(err.value)

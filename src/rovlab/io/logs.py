@@ -26,38 +26,11 @@ from typing import IO, Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from rovlab.io.tables import scan_csv
+from rovlab.io.tables import NUMBER_EXPECTED, RANGE_EXPECTED, number_problem, parse_number, scan_csv  # noqa: F401
 from rovlab.params.validate import ConfigError, Problem
 
 _MAX_PROBLEMS = 20
 _MISSING = {"", "nan", "NaN", "NAN", "na", "NA"}
-# A number as C, CSV readers and spreadsheets write one: ASCII digits, optional sign, point and
-# exponent, or inf/infinity. Python's float() also takes '1_000' and non-ASCII digits ('１２'),
-# which no other tool reads as numbers: such cells are refused.
-_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:inf|infinity))")
-NUMBER_EXPECTED = "a number (ASCII digits, e.g. 1.5e-3; or empty / nan for no value)"
-RANGE_EXPECTED = "a number within +-1.8e308 (inf is written inf)"
-
-
-def parse_number(text: str) -> float | None:
-    """The float a (stripped) CSV cell holds, or None if it is not a number in the log format.
-
-    Overflowing literals such as ``1e400`` are not numbers (they would silently become inf, which
-    in a log means a faulty sample): None too; the caller words the refusal.
-    """
-    if not _NUMBER.fullmatch(text):
-        return None
-    x = float(text)
-    if math.isinf(x) and "n" not in text.lower():
-        return None  # 1e400: out of range, not 'inf'
-    return x
-
-
-def number_problem(text: str) -> str:
-    """What was expected of a cell that parse_number refused."""
-    return RANGE_EXPECTED if _NUMBER.fullmatch(text) else NUMBER_EXPECTED
-
-
 @dataclass(frozen=True, eq=False)
 class Log:
     """The columns of one log as float arrays (NaN = no value), with the file line of each row."""

@@ -14,6 +14,7 @@ line and the column, so that command-line tools print it without a traceback::
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Mapping, Sequence
@@ -24,6 +25,32 @@ from rovlab.params.edit import atomic_write_text
 from rovlab.params.validate import ConfigError, Problem
 
 _MAX_PROBLEMS = 20  # stop collecting after this many bad cells (the rest are likely the same)
+
+# A number as C, CSV readers and spreadsheets write one: ASCII digits, optional sign, point and
+# exponent, or inf/infinity. Python's float() also takes '1_000' and non-ASCII digits ('１２'),
+# which no other tool reads as numbers: such cells are refused.
+_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:inf|infinity))")
+NUMBER_EXPECTED = "a number (ASCII digits, e.g. 1.5e-3; or empty / nan for no value)"
+RANGE_EXPECTED = "a number within +-1.8e308 (inf is written inf)"
+
+
+def parse_number(text: str) -> float | None:
+    """The float a (stripped) CSV cell holds, or None if it is not a number in the log format.
+
+    Overflowing literals such as ``1e400`` are not numbers (they would silently become inf, which
+    in a log means a faulty sample): None too; the caller words the refusal.
+    """
+    if not _NUMBER.fullmatch(text):
+        return None
+    x = float(text)
+    if math.isinf(x) and "n" not in text.lower():
+        return None  # 1e400: out of range, not 'inf'
+    return x
+
+
+def number_problem(text: str) -> str:
+    """What was expected of a cell that parse_number refused."""
+    return RANGE_EXPECTED if _NUMBER.fullmatch(text) else NUMBER_EXPECTED
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,11 +203,11 @@ def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "d
                                     f"{n} values, one per column ({', '.join(header)})"))
         else:
             for c, cell in enumerate(cells):
-                try:
-                    x = float(cell)
-                except ValueError:
+                x = parse_number(cell)
+                if x is None:  # also '1_000', full-width digits and 1e400, which float() would take
                     problems.append(Problem(file, f"line {number}, column {header[c]!r}", cell or "(empty)",
-                                            "a number"))
+                                            "a finite number" if number_problem(cell) == RANGE_EXPECTED
+                                            or cell.lower().lstrip("+-") == "nan" else "a number"))
                     continue
                 if not math.isfinite(x):
                     problems.append(Problem(file, f"line {number}, column {header[c]!r}", cell,
