@@ -1,9 +1,11 @@
 """The layout tells the architecture (STYLE.md): dependencies point downward only.
 
-    interfaces -> sim -> {control, estimation, allocation, ident} -> models -> {params, io}
+    interfaces -> sim -> {control, estimation, allocation, ident} -> models -> io -> params -> core
 
-The four middle siblings do not import each other, and heavy or optional packages (plotting,
-web server, browser automation, MCAP, Dask) are imported only at the edges.
+The four middle siblings do not import each other (io may read params' errors, never the other
+way round; core, the shared helpers, imports no other rovlab package). Relative imports count
+like absolute ones. Heavy or optional packages (plotting, web server, browser automation, MCAP,
+Dask) are imported only at the edges.
 """
 
 from __future__ import annotations
@@ -14,24 +16,41 @@ from pathlib import Path
 import rovlab
 
 ROOT = Path(rovlab.__file__).parent
-LAYER = {"params": 0, "io": 0, "models": 1, "allocation": 2, "estimation": 2, "control": 2, "ident": 2,
-         "sim": 3, "interfaces": 4}
+LAYER = {"core": 0, "params": 1, "io": 2, "models": 3, "allocation": 4, "estimation": 4, "control": 4,
+         "ident": 4, "sim": 5, "interfaces": 6}
 SIBLINGS = {"allocation", "estimation", "control", "ident"}
 EDGE_ONLY = {"matplotlib", "aiohttp", "playwright", "mcap", "dask", "distributed"}
 EDGE_PACKAGES = {"interfaces", "io"}  # plus ident/plots.py and io/report.py, which import lazily
 
 
-def _imports(path: Path) -> list[tuple[str, int, bool]]:
-    """(module, line, at top level) of every import in a file."""
+def _imports(path: Path, package: list[str] | None = None) -> list[tuple[str, int, bool]]:
+    """(module, line, at top level) of every import in a file; relative imports resolved
+    against the file's package (by default its place under rovlab/)."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
     top = {id(n) for n in tree.body}
+    package = package or ["rovlab", *path.relative_to(ROOT).parts[:-1]]
     out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             out.extend((a.name, node.lineno, id(node) in top) for a in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            out.append((node.module, node.lineno, id(node) in top))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                module = node.module or ""
+            else:
+                base = package[:len(package) - (node.level - 1)]
+                module = ".".join(base + ([node.module] if node.module else []))
+            if module:
+                out.append((module, node.lineno, id(node) in top))
     return out
+
+
+def test_relative_imports_are_resolved(tmp_path):
+    """The checker sees through `from ..x import y` (a relative import cannot slip past it)."""
+    probe = tmp_path / "probe.py"
+    probe.write_text("from ..sim import runner\nfrom . import sibling\nfrom .kinetics import pack\n",
+                     encoding="utf-8")
+    found = [m for m, _, _ in _imports(probe, ["rovlab", "models"])]
+    assert found == ["rovlab.sim", "rovlab.models", "rovlab.models.kinetics"]
 
 
 def test_dependencies_point_downward():

@@ -49,3 +49,17 @@ def test_start_serve_and_stop_with_ctrl_c(tmp_path):
     logs = sorted(p.name for p in tmp_path.glob("session-*.csv"))
     assert len(logs) == 1 and str(tmp_path) in err  # the log's path is printed
     assert (tmp_path / logs[0]).read_text().count("\n") > 2
+
+
+def test_a_busy_port_writes_no_empty_session_log(capsys, tmp_path):
+    # issue 15: the error came after an empty session log had been written
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        assert main(["hmi", "--port", str(port), "--paused", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"cannot listen on 127.0.0.1:{port}" in err and "--port 0" in err
+    assert list(tmp_path.iterdir()) == []  # no session log, no events file

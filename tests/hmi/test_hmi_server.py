@@ -238,3 +238,75 @@ def test_the_server_runs_in_a_thread_and_stops_cleanly(session):
         assert st.call(lambda: session.source.time) == 0.0
     with pytest.raises(OSError):
         urllib.request.urlopen(st.url, timeout=2)
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 15 item 12: what the fuzzer found in the server
+# --------------------------------------------------------------------------------------------
+
+def test_a_malformed_host_header_is_a_400_not_a_500(session):
+    async def main():
+        _, client = await _client(session)
+        try:
+            for host in ("[::1", "[zz]:80"):
+                r = await client.get("/", headers={"Host": host})
+                assert r.status in (400, 403), (host, r.status)
+        finally:
+            await client.close()
+
+    run(main())
+
+
+def test_an_https_origin_is_refused(session):
+    async def main():
+        _, client = await _client(session)
+        try:
+            base = str(client.make_url("/")).rstrip("/")
+            for origin in (base.replace("http://", "https://"), base.replace("http://", "ws://"), "null",
+                           "http://[::1"):
+                r = await client.get("/ws", headers={"Origin": origin, "Connection": "Upgrade",
+                                                     "Upgrade": "websocket", "Sec-WebSocket-Version": "13",
+                                                     "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ=="})
+                assert r.status == 403, origin
+        finally:
+            await client.close()
+
+    run(main())
+
+
+def test_a_burst_of_commands_from_one_client_does_not_freeze_the_others(session):
+    from rovlab.interfaces.hmi.server import MAX_PENDING_COMMANDS
+
+    async def main():
+        server, client = await _client(session)
+        try:
+            noisy = await client.ws_connect("/ws")
+            calm = await client.ws_connect("/ws")
+            await _next(noisy, "hello")
+            await _next(calm, "hello")
+            n = 200
+            for i in range(n):  # each redesigns the LQR: tens of ms apiece
+                await noisy.send_str(json.dumps({"cmd": "set", "target": "config", "id": i,
+                                                 "key": "lqr.input_weight.Z", "value": 0.1 + 1e-4 * i}))
+            await calm.send_str(json.dumps({"cmd": "state", "id": "calm"}))
+            reply = await _next(calm, "reply")
+            assert reply["id"] == "calm"
+            # the calm client was answered while the burst was still being worked through
+            pending = max(len(c.commands) for c in server.clients)
+            assert pending > 0
+            assert pending <= MAX_PENDING_COMMANDS
+            answered, refused = 0, 0
+            while answered + refused < n:
+                frame = json.loads((await noisy.receive(timeout=30)).data)
+                if frame["type"] == "reply":
+                    answered += 1
+                elif frame["type"] == "error":
+                    assert "too many commands waiting" in frame["message"]
+                    refused += 1
+            assert answered >= MAX_PENDING_COMMANDS
+            await noisy.close()
+            await calm.close()
+        finally:
+            await client.close()
+
+    asyncio.run(asyncio.wait_for(main(), 120))

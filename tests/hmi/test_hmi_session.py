@@ -221,3 +221,41 @@ def test_the_scenarios_plant_parameters_become_the_truth_document(tmp_path):
     assert s.documents["truth"].get("added_mass.Z_wdot") == -12.0
     assert s.documents["vehicle"].get("rigid_body.mass") == 7.31
     assert s.source.loop_summary()["truth"]["mass"] == 7.6
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 15 item 12: what the fuzzer found in the HMI commands
+# --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("command", [
+    {"cmd": "save", "target": "vehicle", "name": "evil.toml\n"},  # used to write 'evil.toml⏎'
+    {"cmd": "set", "target": "truth", "key": "damping.heave.linear", "value": -1e18},
+    {"cmd": "set", "target": "config", "key": "initial.state.z", "value": -1e308},
+    {"cmd": "step", "n": 10000},  # froze every client for a second
+    {"cmd": "set", "target": "vehicle", "key": "rigid_body.mass", "value": "[" * 20 + "1" + "]" * 20},
+])
+def test_fuzzer_findings_are_refused_and_nothing_changes(session, command):
+    before = {t: d.data for t, d in session.documents.items()}
+    time_before = session.source.time
+    with pytest.raises(CommandError) as info:
+        session.handle(command)
+    assert info.value.message
+    assert {t: d.data for t, d in session.documents.items()} == before
+    assert session.source.time == time_before
+    assert not any(p.name.startswith("evil") for p in session.out_dir.glob("*")) if session.out_dir.exists() else True
+
+
+def test_a_deeply_nested_command_is_refused_without_recursion(session):
+    deep: object = 1
+    for _ in range(5000):  # deeper than Python's recursion limit
+        deep = [deep]
+    with pytest.raises(CommandError, match="nested deeper than"):
+        session.handle({"cmd": "set", "target": "vehicle", "key": "rigid_body.mass", "value": deep})
+
+
+def test_step_accepts_up_to_its_bound(session):
+    from rovlab.interfaces.hmi.session import MAX_STEPS_PER_COMMAND
+
+    session.handle({"cmd": "pause"})
+    out = session.handle({"cmd": "step", "n": MAX_STEPS_PER_COMMAND})
+    assert out.messages

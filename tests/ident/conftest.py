@@ -52,3 +52,9 @@ def lab_table(tmp_path):
 
     return make
 
+
+
+@pytest.fixture(autouse=True)
+def _work_in_tmp(tmp_path, monkeypatch):
+    """`identify` writes its figure into the working directory (issue 15): keep it out of the repo."""
+    monkeypatch.chdir(tmp_path)

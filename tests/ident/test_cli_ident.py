@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -55,16 +56,22 @@ def test_thrust_table_of_the_maker(capsys, tmp_path):
     assert (tmp_path / "t200.png").stat().st_size > 10_000
 
 
-def test_towing_round_trip_writes_plot_next_to_the_data(capsys, tmp_path, vehicle_copy):
+def test_towing_round_trip_writes_plot_into_the_working_directory(capsys, tmp_path, vehicle_copy, monkeypatch):
+    # issue 15: the figure used to go next to the input (inside the installed package for packaged data)
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
     runs = tmp_path / "heave.csv"
     made = run_json(capsys, "lab", "towing", "--dof", "heave", "--seed", 5, "--out", runs)
     rig = tmp_path / "heave-rig.csv"
     assert made["written"][1]["file"] == str(rig)
-    data = run_json(capsys, "identify", "towing", runs, "--rig", rig, "--dof", "heave", "--update", vehicle_copy)
+    data = run_json(capsys, "identify", "towing", runs, "--rig", rig, "--update", vehicle_copy)  # DOF from the log
+    assert data["dof"] == "heave"
     assert set(data) >= {"linear", "quadratic", "cubic"}
     for key, truth in (("linear", -5.18), ("quadratic", -36.99), ("cubic", -123.15)):  # SPEC 2, heave
         assert abs(data[key] - truth) < 3.5 * data["stderr"][key]
-    assert data["plot"] == str(tmp_path / "heave-towing.png") and (tmp_path / "heave-towing.png").exists()
+    assert data["plot"] == "heave-towing.png" and (work / "heave-towing.png").exists()
+    assert not (tmp_path / "heave-towing.png").exists()
     v = load_vehicle(vehicle_copy)
     assert v.damping_linear[2] == pytest.approx(data["linear"], rel=1e-3)
     assert "heave: rovlab identify towing heave.csv --rig heave-rig.csv" in v.sources["damping"]
@@ -168,7 +175,7 @@ def test_update_that_would_break_the_file_writes_nothing(capsys, tmp_path, vehic
     flipped = tmp_path / "flipped.csv"
     write_table(flipped, {c: (-t[c] if c == "force_n" else t[c]) for c in t.columns}, formats={"run": "d"})
     before = vehicle_copy.read_text(encoding="utf-8")
-    code, _, err = run(capsys, "identify", "towing", flipped, "--no-plot", "--update", vehicle_copy)
+    code, _, err = run(capsys, "identify", "towing", flipped, "--no-plot", "--dof", "surge", "--update", vehicle_copy)
     assert code == 2 and "nothing was written" in err and "damping.surge.linear" in err
     assert vehicle_copy.read_text(encoding="utf-8") == before
 
@@ -337,3 +344,79 @@ def test_positive_added_mass_points_at_the_mass_option(capsys, tmp_path):
         "--out", log)
     code, _, err = run(capsys, "identify", "step", log, "--mass", 7.31, "--no-plot")
     assert code == 0 and "added mass comes out positive" in err and "inertia I_zz" in err
+
+
+def test_towing_dof_is_inferred_or_required(capsys, tmp_path):
+    # issue 15: heave data used to be reported (and written with --update) as "surge"
+    from rovlab.io.tables import read_table, write_table
+
+    runs = tmp_path / "heave.csv"
+    run(capsys, "lab", "towing", "--dof", "heave", "--seed", 4, "--out", runs)
+    t = read_table(runs)
+    bare = tmp_path / "bare.csv"  # no '# setting.dof' line
+    write_table(bare, {c: t[c] for c in t.columns}, formats={"run": "d"})
+    code, _, err = run(capsys, "identify", "towing", bare, "--no-plot")
+    assert code == 2 and str(bare) in err and "expected --dof surge, --dof sway or --dof heave" in err
+    assert run_json(capsys, "identify", "towing", bare, "--no-plot", "--dof", "heave")["dof"] == "heave"
+    named = tmp_path / "named.csv"  # the speed column says the DOF
+    write_table(named, {("w_mps" if c == "speed_mps" else c): t[c] for c in t.columns}, formats={"run": "d"})
+    assert run_json(capsys, "identify", "towing", named, "--no-plot")["dof"] == "heave"
+    code, _, err = run(capsys, "identify", "towing", runs, "--no-plot", "--dof", "surge")
+    assert code == 2 and "the log says it is a heave towing log" in err
+
+
+def test_noise_refuses_a_staircase_as_a_resting_log(capsys, tmp_path):
+    # issue 15: a PWM staircase was accepted as sensor noise at rest
+    staircase = tmp_path / "staircase.csv"
+    run(capsys, "lab", "thrust", "--seed", 2, "--pwm-step", "50", "--step-s", "5", "--out", staircase)
+    code, _, err = run(capsys, "identify", "noise", staircase, "--no-plot")
+    assert code == 2 and str(staircase) in err and "not a resting log" in err and "'pwm_us'" in err
+    code, _, _ = run(capsys, "identify", "noise", staircase, "--no-plot", "--no-stationarity-check")
+    assert code == 0
+    resting = tmp_path / "rest.csv"
+    run(capsys, "lab", "noise", "--seed", 2, "--samples", "500", "--out", resting)
+    data = run_json(capsys, "identify", "noise", resting, "--no-plot")
+    assert all(1.5 < r < 2.5 for r in data["von_neumann_ratio"].values())  # white noise: 2
+
+
+def test_plot_of_packaged_data_goes_to_the_working_directory(capsys, tmp_path, monkeypatch):
+    from importlib import resources
+
+    monkeypatch.chdir(tmp_path)
+    table = resources.files("rovlab.models") / "data" / "t200" / "T200-Thrusters-16V.csv"
+    before = {p.name for p in Path(str(table)).parent.iterdir()}
+    data = run_json(capsys, "identify", "thrust", str(table), "--table")
+    assert data["plot"] == "T200-Thrusters-16V-thrust.png" and (tmp_path / data["plot"]).exists()
+    assert {p.name for p in Path(str(table)).parent.iterdir()} == before
+
+
+def test_update_on_a_read_only_or_full_disk_fails_cleanly(capsys, tmp_path, vehicle_copy, monkeypatch):
+    # issue 15: an OSError traceback, and a temporary file left behind
+    import errno
+    import os
+
+    import rovlab.params.edit as edit
+
+    log = tmp_path / "rest.csv"
+    run(capsys, "lab", "noise", "--seed", 3, "--samples", "300", "--out", log)
+    before = vehicle_copy.read_text(encoding="utf-8")
+    folder_before = sorted(p.name for p in vehicle_copy.parent.iterdir())
+
+    def full_disk(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(edit.os, "fsync", full_disk)
+    code, _, err = run(capsys, "identify", "noise", log, "--no-plot", "--update", vehicle_copy)
+    assert code == 2 and str(vehicle_copy) in err and "No space left on device" in err and "Traceback" not in err
+    assert vehicle_copy.read_text(encoding="utf-8") == before
+    assert sorted(p.name for p in vehicle_copy.parent.iterdir()) == folder_before  # no temporary file left
+    monkeypatch.undo()
+
+    vehicle_copy.chmod(0o444)
+    try:
+        code, _, err = run(capsys, "identify", "noise", log, "--no-plot", "--update", vehicle_copy)
+    finally:
+        vehicle_copy.chmod(0o644)
+    if os.geteuid() != 0:  # root may write anything: os.access says so
+        assert code == 2 and "read-only" in err
+    assert vehicle_copy.read_text(encoding="utf-8") == before or code == 0

@@ -86,3 +86,32 @@ def test_semicolon_file_is_explained_without_required_columns(tmp_path):
     path = _write(tmp_path, "time_s;force_n;position_m\n0;1;0\n")
     with pytest.raises(ConfigError, match="found ';'-separated names"):
         read_table(path)
+
+
+# Issue 15 item 12: numbers Python reads but no instrument writes, and implausible magnitudes.
+@pytest.mark.parametrize(("cell", "expected"), [
+    ("1_000", "a number (ASCII digits"),
+    ("１２", "a number (ASCII digits"),
+    ("0x10", "a number (ASCII digits"),
+    ("1e400", "a finite number"),
+    ("1e154", "a magnitude of at most 100000"),
+    ("1e-300", "0 or a magnitude of at least 1e-30"),
+])
+def test_odd_numbers_and_magnitudes_are_refused(tmp_path, cell, expected):
+    path = _write(tmp_path, f"time_s,force_n\n0.0,1.0\n0.1,{cell}\n")
+    with pytest.raises(ConfigError) as info:
+        read_table(path)
+    msg = str(info.value.problems[0])
+    assert str(path) in msg and "line 3, column 'force_n'" in msg and expected in msg
+
+
+def test_time_steps_below_a_microsecond_and_huge_run_numbers_are_refused(tmp_path):
+    from rovlab.io.tables import require_increasing
+
+    t = read_table(_write(tmp_path, "time_s,x\n0.0,1\n1e-9,2\n"))
+    with pytest.raises(ConfigError, match=r"line 3, column 'time_s'.*at least 1e-06 s after"):
+        require_increasing(t)
+    with pytest.raises(ConfigError, match=r"line 2, column 'run'.*at most 1e\+09"):
+        read_table(_write(tmp_path, "run,time_s\n1e12,0.0\n", name="runs.csv"))
+    ok = read_table(_write(tmp_path, "time_s,force_n\n-0.0,0\n0.5,-1.5e-3\n", name="ok.csv"))
+    np.testing.assert_array_equal(ok["force_n"], [0.0, -1.5e-3])

@@ -139,3 +139,58 @@ def test_thrusters_must_be_an_array_of_tables(tmp_path):
     text = 'thrusters = 6\n' + re.sub(r"thrusters = 6\n", "", text)
     msgs = _problems(tmp_path, text)
     assert any(": thrusters:" in m and "array of tables" in m for m in msgs)
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 15 item 12: physical plausibility (docs/vehicle-file.md, "Plausible ranges"). Each of these
+# was accepted by `vehicle check` and then turned the plant NaN (or broke an output file).
+# --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "expected"),
+    [
+        ("surge = { linear = -4.03,", "surge = { linear = -9e18,", "damping.surge.linear", "-10000 .. 0"),
+        ("gravity = 9.81", "gravity = 1.8e19", "restoring.gravity", "9.7 .. 9.9"),
+        ("rate_hz = 10.0\nvariance = { z = 1.189622e-04 }", "rate_hz = 1e308\nvariance = { z = 1.189622e-04 }",
+         "sensors[1].rate_hz", "0.01 .. 10000"),
+        ("rate_hz = 10.0\nvariance = { z = 1.189622e-04 }", "rate_hz = 1e-29\nvariance = { z = 1.189622e-04 }",
+         "sensors[1].rate_hz", "0.01 .. 10000"),
+        ("position = [0.153, -0.111, -0.004]", "position = [1.5e11, -0.111, -0.004]", "thrusters[0].position",
+         "-5 .. 5"),
+        ("mass = 7.31", "mass = 7.31e6", "rigid_body.mass", "0.1 .. 1000"),
+        ("mass = 7.31", "mass = 1.0", "restoring.displaced_volume", "B/W is 7.99"),
+        ('name = "T2"', 'name = "T2\\u0000"', "thrusters[1].name", "control characters"),
+        ('name = "pressure"', 'name = "pres\\nsure"', "sensors[1].name", "a name"),
+        ("variance = { z = 1.189622e-04 }", "variance = { z = 5e-324 }", "sensors[1].variance.z", "1e-15 .. 10000"),
+    ],
+)
+def test_implausible_values_are_refused(tmp_path, old, new, key, expected):
+    assert old in UDRONE_TEXT
+    msgs = _problems(tmp_path, UDRONE_TEXT.replace(old, new, 1))
+    hits = [m for m in msgs if f": {key}:" in m]
+    assert hits, f"no message for {key}: {msgs}"
+    assert expected in hits[0]
+    assert "docs/vehicle-file.md" in hits[0] or "name" in key
+
+
+def test_vehicle_name_with_nul_and_no_sensors_are_refused(tmp_path):
+    text = UDRONE_TEXT.replace('name = "udrone"', 'name = "ud\\u0000rone"', 1)
+    text = text[:text.index("[[sensors]]")]
+    msgs = _problems(tmp_path, text)
+    assert any(": name:" in m and "\\x00" in m for m in msgs), msgs
+    assert any(": sensors:" in m and "missing" in m for m in msgs), msgs
+
+
+def test_vehicle_check_exit_status_and_show_json_is_strict_json(tmp_path, capsys):
+    import json
+
+    from rovlab.interfaces.cli import main
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text(UDRONE_TEXT.replace("gravity = 9.81", "gravity = 1.8e19"), encoding="utf-8")
+    assert main(["vehicle", "check", str(bad)]) == 2
+    out = capsys.readouterr().out
+    assert str(bad) in out and "restoring.gravity" in out and "1.8e+19" in out
+    assert main(["vehicle", "show", "udrone", "--json"]) == 0
+    out = capsys.readouterr().out
+    json.loads(out, parse_constant=lambda c: pytest.fail(f"not JSON: {c}"))

@@ -75,3 +75,54 @@ def test_distributions_draw_from_the_seed(tmp_path):
 def test_unknown_scenario_name():
     with pytest.raises(ConfigError, match="packaged scenario name"):
         load_scenario("no-such-scenario")
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 15 items 9 and 12: every problem at once, including those that need the referenced files;
+# implausible values refused before anything runs.
+# --------------------------------------------------------------------------------------------
+
+def test_all_problems_of_a_scenario_at_once(tmp_path):
+    text = (DROPOUT_TEXT.replace("seed = 3", "seed = -3")
+            .replace("z = 1.05", 'z = { dist = "gamma" }')
+            .replace('plant = "process"', 'plant = "submarine"')
+            .replace("plant_step_s = 0.01", "plant_step_s = 0.03")
+            .replace('sensor = "qualisys"', 'sensor = "sonar"')
+            .replace('design = "thesis"', 'design = "no_such_config"'))
+    msgs = _problems(tmp_path, text)
+    keys = {m.split(": ")[1] for m in msgs}
+    assert {"seed", "initial.z.dist", "plant", "design", "dropout[0].sensor"} <= keys, msgs
+    text = DROPOUT_TEXT.replace("plant_step_s = 0.01", "plant_step_s = 0.03").replace(
+        'sensor = "qualisys"', 'sensor = "qualisys.u"')
+    msgs = _problems(tmp_path, text)
+    assert any(": plant_step_s:" in m and "divides the filter's sample time 0.1 s" in m for m in msgs), msgs
+    assert any(": dropout[0].sensor:" in m and "qualisys.psi" in m for m in msgs), msgs
+
+
+@pytest.mark.parametrize(("old", "new", "key", "expected"), [
+    ("plant_step_s = 0.01", "plant_step_s = 1e-308", "plant_step_s", "0.0001 .. 1"),
+    ("plant_step_s = 0.01", "plant_step_s = 5e-324", "plant_step_s", "0.0001 .. 1"),
+    ("plant_step_s = 0.01", "plant_step_s = 1e-9", "plant_step_s", "0.0001 .. 1"),
+    ("duration_s = 60.0", "duration_s = 900000.0", "plant_step_s", "at most 1e+07 plant steps"),
+    ("heave = 0.3", "heave = 1e15", "truth.bias_std.heave", "0 .. 1000"),
+    ("z = 1.05", "z = 1e308", "initial.z", "-10000 .. 10000"),
+    ("z = 0.70", "z = -1e308", "reference[0].z", "-10000 .. 10000"),
+    ('name = "dropout"', 'name = "evil\\nname"', "name", "a name"),
+])
+def test_implausible_scenarios_are_refused(tmp_path, old, new, key, expected):
+    assert old in DROPOUT_TEXT
+    msgs = _problems(tmp_path, DROPOUT_TEXT.replace(old, new, 1))
+    hits = [m for m in msgs if f": {key}:" in m]
+    assert hits, msgs
+    assert expected in hits[0]
+
+
+def test_simulate_refuses_a_subnormal_plant_step_with_exit_2(tmp_path, capsys):
+    from rovlab.interfaces.cli import main
+
+    path = tmp_path / "tiny.toml"
+    path.write_text(DROPOUT_TEXT.replace("plant_step_s = 0.01", "plant_step_s = 5e-324"), encoding="utf-8")
+    assert main(["simulate", str(path), "--out", str(tmp_path / "out"), "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: plant_step_s: got 5e-324" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()

@@ -1,4 +1,4 @@
-"""Thrust configuration matrix from thruster positions and directions (SPEC section 3).
+"""Thrust configuration matrix from thruster positions and directions (Sandøy 2016, ch. 2).
 
 Thruster i at r_i with unit thrust direction e_i contributes the wrench column
 [e_i; r_i x e_i]; stacking the columns gives B (6 x n, rows X, Y, Z, K, M, N) with

@@ -24,22 +24,22 @@ allocation are sibling layers and do not import each other).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-from rovlab.control.lqr import LQRDesign
-
-_TWO_PI = 2.0 * math.pi
+from rovlab.control.lqr import LQRDesign, design_lqr_from_config
+from rovlab.core.angles import wrap_angle
+from rovlab.core.components import ControllerSpec, register_controller
+from rovlab.params.design import DesignConfig
+from rovlab.params.vehicle import Vehicle
 
 
 @njit(cache=True)
 def lqg_tau(K, P, x_hat, ref, tau):
-    e_psi = ref[1] - x_hat[1]
-    e_psi -= _TWO_PI * math.ceil((e_psi - math.pi) / _TWO_PI)  # to (-pi, pi]
-    psi_eq = ref[1] - e_psi
+    psi_eq = ref[1] - wrap_angle(ref[1] - x_hat[1])
     for i in range(2):
         acc = P[i, 0] * ref[0] + P[i, 1] * ref[1]
         acc -= K[i, 0] * x_hat[0] + K[i, 1] * psi_eq + K[i, 2] * x_hat[2] + K[i, 3] * x_hat[3]
@@ -66,6 +66,47 @@ class LQGController:
         out = np.empty(2)
         lqg_tau(self.K, self.P, x, r, out)
         return out
+
+
+class LQG(NamedTuple):
+    """The LQG law as a closed-loop component (controller slot): no state of its own."""
+
+    K: np.ndarray  # 2 x 4
+    P: np.ndarray  # 2 x 2
+    x6: np.ndarray  # (6) work: [z, psi, w, r, b_Z, b_N] gathered from the estimate
+    r2: np.ndarray  # (2) work: [z_ref, psi_ref]
+    u2: np.ndarray  # (2) work: [Z, N]
+    state: np.ndarray  # (0)
+
+    STATE = ("state",)
+
+
+_FROM_NAV = (2, 3, 6, 7, 10, 11)  # z, psi, w, r, b_Z, b_N in rovlab.core.components.TRUTH
+
+
+@njit(cache=True, inline="always")
+def _lqg_step(ctrl, t, nav, ref, tau):
+    for i in range(6):
+        ctrl.x6[i] = nav[_FROM_NAV[i]]
+    ctrl.r2[0] = ref[2]
+    ctrl.r2[1] = ref[3]
+    lqg_tau(ctrl.K, ctrl.P, ctrl.x6, ctrl.r2, ctrl.u2)
+    tau[0] = 0.0
+    tau[1] = 0.0
+    tau[2] = ctrl.u2[0]
+    tau[3] = ctrl.u2[1]
+
+
+register_controller(LQG, step=_lqg_step)
+
+
+def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:
+    """Design the LQR of a configuration and wrap it as the LQG component (raises ConfigError)."""
+    design = design_lqr_from_config(vehicle, config)
+    kernel = LQG(np.ascontiguousarray(design.K, dtype=float), np.ascontiguousarray(design.P, dtype=float),
+                 np.zeros(6), np.zeros(2), np.zeros(2), np.zeros(0))
+    return ControllerSpec(kernel=kernel, needs=("z", "psi", "w", "r", "b_Z", "b_N"), references=("z", "psi"),
+                          outputs=("Z", "N"), model=design)
 
 
 def tau_to_wrench(tau: np.ndarray) -> np.ndarray:

@@ -28,8 +28,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm, solve_discrete_are
+from scipy.linalg import solve_discrete_are
 
+from rovlab.core.weights import bryson_diagonal
+from rovlab.models.discretise import zoh
 from rovlab.models.linear import HeaveYawParams, control_model
 from rovlab.params.design import DesignConfig
 from rovlab.params.validate import ConfigError, Problem
@@ -41,20 +43,10 @@ INPUTS = ("Z", "N")
 
 def bryson(maxima: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """Diagonal weight matrix diag(w_i / max_i^2) (w_i = 1 when not given)."""
-    mx = np.asarray(maxima, dtype=float).ravel()
-    w = np.ones_like(mx) if weights is None else np.asarray(weights, dtype=float).ravel()
-    if mx.shape != w.shape or np.any(~np.isfinite(mx)) or np.any(mx <= 0) or np.any(w < 0):
+    mx = np.asarray(maxima, dtype=float)
+    if np.any(~np.isfinite(mx)):
         raise ValueError("Bryson's rule needs positive maxima and non-negative weights of the same length")
-    return np.diag(w / mx**2)
-
-
-def zoh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """(Phi, Delta) = (e^{Ah}, int_0^h e^{As} ds B) from one exponential of [[A, B], [0, 0]] h."""
-    A = np.asarray(A, dtype=float)
-    B = np.asarray(B, dtype=float).reshape(A.shape[0], -1)
-    n, m = B.shape
-    G = expm(np.block([[A, B], [np.zeros((m, n + m))]]) * h)
-    return G[:n, :n], G[:n, n:]
+    return np.diag(bryson_diagonal(mx, weights))
 
 
 def dlqr(Phi: np.ndarray, Delta: np.ndarray, Q: np.ndarray, R: np.ndarray

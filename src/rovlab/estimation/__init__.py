@@ -1,4 +1,4 @@
-"""State estimation, one module per role (SPEC section 5):
+"""State estimation, one module per role (Sandøy 2016, sec. 5.1):
 
 * ``discretise``  -- zero-order-hold discretisation and Van Loan's process-noise covariance
 * ``model``       -- the depth-and-heading observer model from a vehicle and a configuration,

@@ -21,12 +21,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
+from rovlab.core.angles import wrap
+
 
 def wrap_errors(error: np.ndarray, angle_columns: tuple[int, ...] = (1,)) -> np.ndarray:
     """A copy of error (..., n) with the given state columns wrapped to (-pi, pi] (psi is 1)."""
     e = np.array(error, dtype=float)
     for c in angle_columns:
-        e[..., c] = -((-e[..., c] + np.pi) % (2 * np.pi) - np.pi)
+        e[..., c] = wrap(e[..., c])
     return e
 
 

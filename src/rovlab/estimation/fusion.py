@@ -61,6 +61,8 @@ import math
 import numpy as np
 from numba import njit
 
+from rovlab.core.angles import wrap_angle  # noqa: F401  (re-exported for the filter kernels)
+
 # channel configuration columns
 CFG_OFFSET, CFG_R, CFG_TIMEOUT, CFG_GATE, CFG_LOSE_AFTER, CFG_RAMP_TIME, CFG_RAMP_FACTOR, CFG_ANGLE, \
     CFG_REACQUIRE, CFG_STATE = range(10)
@@ -82,13 +84,6 @@ REASON_NAMES = ("", "timeout", "nonfinite", "gate", "manual")
 MODE_NAMES = ("auto", "off", "on")
 EVENT_NAMES = ("none", "used", "rejected", "nonfinite", "ignored")
 
-_TWO_PI = 2.0 * math.pi
-
-
-@njit(cache=True)
-def wrap_angle(a: float) -> float:
-    """a wrapped to (-pi, pi]."""
-    return a - _TWO_PI * math.ceil((a - math.pi) / _TWO_PI)
 
 
 def new_channel_state(m: int) -> np.ndarray:

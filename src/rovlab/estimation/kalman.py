@@ -1,12 +1,12 @@
 """Discrete Kalman filter for the depth-and-heading model, with fusion and automatic dead reckoning.
 
-Recursion (SPEC section 5; Brown & Hwang 2012, ch. 4), at sample k:
+Recursion (Sandøy 2016, sec. 5.1; Brown & Hwang 2012, ch. 4), at sample k:
 
 1. correct with the samples y_k that arrived (sensor management in
    :mod:`rovlab.estimation.fusion` decides which are used and with what variance),
 2. report the corrected x_k, P_k,
 3. project with the input u_k held over [t_k, t_k + h):  x^- = Phi x + Delta u,
-   P^- = Phi P Phi^T + Q   (Q from Van Loan: no Gamma Q Gamma^T, SPEC section 11).
+   P^- = Phi P Phi^T + Q   (Q from Van Loan: no Gamma Q Gamma^T: rovlab's correction of Sandøy 2016, sec. 5.1.2).
 
 **Sequential scalar updates.** R is diagonal (independent sensors), so the stacked update with
 all samples of a step equals the same update done one channel at a time (Bierman 1977, ch. II;

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.linalg import null_space, qr
 from scipy.special import gammaincinv  # not scipy.stats: its import alone takes ~0.7 s
 
-from rovlab.estimation.discretise import discretise
+from rovlab.models.discretise import discretise
 from rovlab.models.linear import HeaveYawParams, observer_model
 from rovlab.params.design import INPUTS, OBSERVER_STATES, DesignConfig
 from rovlab.params.validate import ConfigError, Problem

@@ -1,4 +1,4 @@
-"""Identification from lab experiments (SPEC section 9) and the virtual lab that rehearses them.
+"""Identification from lab experiments (Sandøy 2016, sec. 2.3 and ch. 4) and the virtual lab that rehearses them.
 
 One module per experiment, each a pure function from arrays (or a loaded data table) to a
 frozen result holding the estimates, their standard errors, the residuals and a quality measure:
@@ -12,7 +12,7 @@ frozen result holding the estimates, their standard errors, the residuals and a 
 * :mod:`rovlab.ident.lab`        the virtual lab: realistic data for each of them, seeded
 * :mod:`rovlab.ident.plots`      PNG figures of each fit (needs the ``plot`` extra)
 
-Signs follow SNAME (SPEC section 1): identified added-mass and damping derivatives are negative.
+Signs follow SNAME (Fossen 2011; Sandøy 2016, sec. 3.1): identified added-mass and damping derivatives are negative.
 """
 
 from rovlab.ident.added_mass import AddedMassEstimate, added_mass_dnv, added_mass_from_vehicle

@@ -1,4 +1,4 @@
-"""Added mass from the box geometry: Eidsvik's empirical method on DNV-RP-H103 tables (SPEC 9.4).
+"""Added mass from the box geometry: Eidsvik's empirical method on DNV-RP-H103 tables (Sandøy 2016, sec. 4.2.1).
 
 The vehicle is treated as a box L x W x H whose projected areas scale the result:
 
@@ -11,7 +11,7 @@ The vehicle is treated as a box L x W x H whose projected areas scale the result
     heave:          Z_wdot = -lambda rho rect_CA(L/W) pi (L/2)^2 c_xy^2 c_xz c_yz W
     yaw:            N_rdot = -lambda rho rect_beta(W/L) pi (L/2)^4 c_yz c_xy c_xz H
 
-(SPEC section 9.4, which fixes the plane labels of thesis table 4.2; Eidsvik 2015; Sandøy 2016
+(with the plane labels of the thesis's table 4.2 corrected; Eidsvik 2015; Sandøy 2016
 sec. 4.2.1.) The DNV tables (``dnv_rp_h103.toml`` next to this file, DNV-RP-H103 appendix A,
 tables A-1 and A-2) are interpolated with not-a-knot cubic splines that extrapolate; a ratio
 outside a table's range is reported in ``extrapolated``.
@@ -114,7 +114,7 @@ class AddedMassEstimate:
 
 def added_mass_dnv(*, length: float, width: float, height: float, area_front: float, area_side: float,
                    area_top: float, rho: float = 1000.0) -> AddedMassEstimate:
-    """Added mass of a box-shaped open-frame vehicle by SPEC 9.4 (inputs in m, m^2, kg/m^3)."""
+    """Added mass of a box-shaped open-frame vehicle by Sandøy 2016, sec. 4.2.1 (inputs in m, m^2, kg/m^3)."""
     dims = {"length": length, "width": width, "height": height, "area_front": area_front,
             "area_side": area_side, "area_top": area_top, "rho": rho}
     bad = [f"{k} = {v!r}" for k, v in dims.items() if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0)]
@@ -159,7 +159,7 @@ def added_mass_dnv(*, length: float, width: float, height: float, area_front: fl
 
 
 def added_mass_from_vehicle(vehicle) -> AddedMassEstimate:
-    """SPEC 9.4 on a vehicle's ``[geometry]`` block and water density."""
+    """Sandøy 2016, sec. 4.2.1 on a vehicle's ``[geometry]`` block and water density."""
     g = vehicle.geometry
     if g is None:
         raise IdentificationError(f"vehicle {vehicle.name!r} has no [geometry] block (length, width, height, "

@@ -1,23 +1,23 @@
-"""The virtual lab: realistic data for every experiment of SPEC section 9, from any vehicle file.
+"""The virtual lab: realistic data for every experiment of Sandøy 2016, sec. 2.3 and ch. 4, from any vehicle file.
 
 No lab data from the thesis survives, so each identification tool is proven on data generated
-here from a vehicle whose true parameters are known (SPEC 9, last paragraph), and users can
+here from a vehicle whose true parameters are known (rovlab's own addition), and users can
 rehearse an experiment before booking the basin. Every rig is seeded (numpy ``Generator``); the
 seed, the settings and the true parameters go into the file's ``#`` comment lines.
 
 Rigs (defaults follow the thesis; every duration is configurable so tests run short versions):
 
-* ``thrust_rig``: load-cell staircase (SPEC 9.1): PWM set-point 1300 -> 1700 us in 10 us steps,
+* ``thrust_rig``: load-cell staircase (Sandøy 2016, sec. 2.3): PWM set-point 1300 -> 1700 us in 10 us steps,
   30 s each; the ESC sees a first-order low-pass of the set-point; true thrust from
   ``rovlab.models.thrusters`` (quadratic or tabulated T200 alike); the load cell is a first-order
   low-pass plus white noise. Several thrusters on the rig at once give their summed force.
-* ``towing_runs``: carriage runs (SPEC 9.2) ramping to five positive and five negative speeds,
+* ``towing_runs``: carriage runs (Sandøy 2016, sec. 4.3.1) ramping to five positive and five negative speeds,
   force = vehicle damping + rig drag + inertia during ramps + a per-run load-cell offset (+ net
   buoyancy in heave) through the load cell; plus rig-only runs.
 * ``yaw_runs``: constant moments (0.25, 0.5, 0.75, 1, 2 N m) integrating
   (I_zz - N_rdot) r_dot = N_r r + N_|r|r |r| r + N_rrr r^3 + N, heading wrapped to (-pi, pi] with
   motion-capture noise.
-* ``relay_test``: a relay on position switches a constant force back and forth (SPEC 9.5); the
+* ``relay_test``: a relay on position switches a constant force back and forth (Sandøy 2016, sec. 4.2.2); the
   4-DOF model of ``rovlab.models.kinetics`` (full nonlinear damping, or linear-only on request)
   is integrated with RK4 and the position is observed by motion capture with the vehicle file's
   variance.
@@ -34,6 +34,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from rovlab.core.angles import wrap as wrap_angle
 from rovlab.params.vehicle import DOF4, Vehicle
 
 # Fallbacks when a vehicle file lacks a sensor: uDrone's Qualisys (thesis table 4.8).
@@ -145,7 +146,7 @@ def thrust_rig(vehicle: Vehicle, thrusters: Sequence[str] | str | None = None, *
                pwm_start: float = 1300.0, pwm_stop: float = 1700.0, pwm_step: float = 10.0, step_s: float = 30.0,
                rate_hz: float = 50.0, command_tau_s: float = 1.0, cell_tau_s: float = 0.1,
                noise_std_n: float = 0.3) -> LabData:
-    """Load-cell log ``time_s, pwm_us, force_n`` of a PWM staircase (SPEC 9.1).
+    """Load-cell log ``time_s, pwm_us, force_n`` of a PWM staircase (Sandøy 2016, sec. 2.3).
 
     ``thrusters``: one name or several mounted together (their forces add: identify with --pair).
     """
@@ -227,7 +228,7 @@ def towing_runs(vehicle: Vehicle, dof: str = "surge", *, seed: int | None = None
                 accel_mps2: float = 0.2, hold_s: float = 15.0, rig_linear: float = -1.0,
                 rig_quadratic: float = -6.0, cell_tau_s: float = 0.1, noise_std_n: float = 0.15,
                 speed_noise_mps: float = 0.002, offset_std_n: float = 0.3) -> tuple[LabData, LabData]:
-    """(vehicle runs, rig-only runs), each ``run, time_s, speed_mps, force_n`` (SPEC 9.2).
+    """(vehicle runs, rig-only runs), each ``run, time_s, speed_mps, force_n`` (Sandøy 2016, sec. 4.3.1).
 
     force_n is the force the carriage applies along the DOF's positive axis: it balances the
     vehicle's SNAME damping, the rig's drag (``rig_linear`` v + ``rig_quadratic`` |v| v), and
@@ -340,11 +341,6 @@ def _position_variance(vehicle: Vehicle, dof: str) -> tuple[float, float, str]:
                                          "variance at 10 Hz (thesis table 4.8) is used")
 
 
-def wrap_angle(x: np.ndarray) -> np.ndarray:
-    """Angles wrapped to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(x, dtype=float), 2 * np.pi)
-
-
 # --------------------------------------------------------------------------------------------
 # Yaw runs
 # --------------------------------------------------------------------------------------------
@@ -355,7 +351,7 @@ DEFAULT_MOMENTS = (0.25, 0.5, 0.75, 1.0, 2.0)
 def yaw_runs(vehicle: Vehicle, *, seed: int | None = None, moments: Sequence[float] = DEFAULT_MOMENTS,
              rest_s: float = 2.0, duration_s: float = 30.0, rate_hz: float | None = None,
              heading_variance: float | None = None, moment_error: float = 0.0) -> LabData:
-    """Constant-moment runs ``run, time_s, moment_nm, heading_rad`` (SPEC 9.3).
+    """Constant-moment runs ``run, time_s, moment_nm, heading_rad`` (Sandøy 2016, sec. 4.3.2).
 
     ``moment_nm`` logs the commanded moment; the moment the thrusters really apply differs from
     it by a random factor per run (relative standard deviation ``moment_error``: open-loop
@@ -399,7 +395,7 @@ def relay_test(vehicle: Vehicle, dof: str = "surge", *, seed: int | None = None,
                amplitude: float = 0.3, duration_s: float = 60.0, rate_hz: float | None = None,
                linear: bool = False, position_variance: float | None = None,
                buoyancy_error_n: float = 1.0) -> LabData:
-    """Relay test: a constant force switched on position at +-amplitude (SPEC 9.5).
+    """Relay test: a constant force switched on position at +-amplitude (Sandøy 2016, sec. 4.2.2).
 
     In heave the relay switches around a trim force B - W taken from the vehicle file, while the
     simulated vehicle is ``buoyancy_error_n`` more buoyant than the file says (the thesis found
@@ -470,7 +466,7 @@ REST_LEVEL = {"x": 2.0, "y": -1.0, "z": 1.2, "phi": 0.01, "theta": -0.02, "psi":
 
 def resting_log(vehicle: Vehicle, *, seed: int | None = None, samples: int = 6796, rate_hz: float | None = None,
                 drift_sigmas: float = 3.0) -> LabData:
-    """``time_s`` and ``<channel>_<sensor>`` columns of the vehicle at rest (SPEC 9.6).
+    """``time_s`` and ``<channel>_<sensor>`` columns of the vehicle at rest (Sandøy 2016, sec. 4.4.1).
 
     Each channel: its rest value + white noise with the vehicle file's variance + a linear drift
     of ``drift_sigmas`` standard deviations over the log (random sign).

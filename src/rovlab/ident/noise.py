@@ -1,4 +1,4 @@
-"""Sensor noise variances from resting logs (SPEC section 9.6; thesis sec. 4.4.1, table 4.8).
+"""Sensor noise variances from resting logs (Sandøy 2016, sec. 4.4.1, table 4.8).
 
 The vehicle rests (weighted down on the basin floor in the thesis, 6796 samples at 10 Hz). Each
 channel's slow drift (temperature, tide, a settling vehicle) is removed by a least-squares
@@ -6,6 +6,12 @@ polynomial in time (degree 1 by default; 0 = mean only), and the sample variance
 with n - (degree + 1) degrees of freedom, is that channel's measurement variance: a diagonal
 entry of a filter's R. A chi-square confidence interval assumes white noise; the optional
 overlapping Allan deviation (IEEE Std 1139) shows whether that holds (slope -1/2 for white noise).
+
+A resting log must look stationary once the drift is removed: the von Neumann ratio (mean square
+successive difference over the variance; von Neumann 1941, Ann. Math. Statist. 12(4) 367-395) is
+2 for white noise and falls towards 0 for steps and slow wandering. A channel whose ratio is below
+``MIN_VON_NEUMANN_RATIO`` (e.g. a PWM staircase or a thrust log given by mistake) is refused
+unless the caller asks otherwise (``rovlab identify noise --no-stationarity-check``).
 
 Columns: ``time_s`` and one column per channel. For ``--update`` a column names its sensor and
 channel as ``<sensor>.<channel>`` (``pressure.z``) or ``<channel>_<sensor>`` (``z_pressure``,
@@ -24,6 +30,7 @@ from rovlab.ident.fitting import IdentificationError, significant
 from rovlab.io.tables import DataTable, read_table, require_increasing
 
 MIN_SAMPLES = 20
+MIN_VON_NEUMANN_RATIO = 0.2  # white noise: 2; a sensor's own low-pass filter lowers it a little
 ALL_CHANNELS = ("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "r")
 
 
@@ -38,6 +45,7 @@ class ChannelNoise:
     residual: np.ndarray = field(repr=False)
     allan_tau_s: np.ndarray | None = field(default=None, repr=False)
     allan_dev: np.ndarray | None = field(default=None, repr=False)
+    von_neumann_ratio: float = 2.0  # mean square successive difference / variance (white: 2)
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,6 +65,7 @@ class NoiseEstimate:
             "std": {k: c.std for k, c in self.channels.items()},
             "ci95": {k: list(c.ci95) for k, c in self.channels.items()},
             "drift_per_s": {k: c.drift_per_s for k, c in self.channels.items()},
+            "von_neumann_ratio": {k: c.von_neumann_ratio for k, c in self.channels.items()},
             "samples": int(self.time_s.size), "rate_hz": self.rate_hz, "detrend_degree": self.detrend_degree,
         }
         if any(c.allan_dev is not None for c in self.channels.values()):
@@ -84,9 +93,23 @@ def allan_deviation(x: np.ndarray, h: float, *, min_clusters: int = 8) -> tuple[
     return np.array(taus), np.array(devs)
 
 
+def von_neumann_ratio(res: np.ndarray) -> float:
+    """Mean square successive difference over the variance of ``res`` (2 for white noise; NaN
+    for a constant signal)."""
+    res = np.asarray(res, dtype=float)
+    var = float(np.mean((res - res.mean()) ** 2))
+    if res.size < 3 or var == 0.0:
+        return float("nan")
+    return float(np.mean(np.diff(res) ** 2)) / var
+
+
 def noise_variances(time_s: np.ndarray, channels: Mapping[str, np.ndarray], *, detrend: int = 1,
-                    allan: bool = False) -> NoiseEstimate:
-    """Variance of each channel of a resting log after removing a polynomial drift."""
+                    allan: bool = False, check_stationary: bool = True) -> NoiseEstimate:
+    """Variance of each channel of a resting log after removing a polynomial drift.
+
+    With ``check_stationary`` a channel whose detrended samples do not look like noise (von
+    Neumann ratio below MIN_VON_NEUMANN_RATIO: steps, a staircase, slow wandering) is refused.
+    """
     from scipy.stats import chi2
 
     t = np.asarray(time_s, dtype=float)
@@ -116,7 +139,17 @@ def noise_variances(time_s: np.ndarray, channels: Mapping[str, np.ndarray], *, d
         taus = devs = None
         if allan:
             taus, devs = allan_deviation(res, h)
-        out[name] = ChannelNoise(var, float(np.sqrt(var)), ci, float(np.mean(x)), slope, int(x.size), res, taus, devs)
+        out[name] = ChannelNoise(var, float(np.sqrt(var)), ci, float(np.mean(x)), slope, int(x.size), res, taus, devs,
+                                 von_neumann_ratio(res))
+    if check_stationary:
+        bad = {k: c.von_neumann_ratio for k, c in out.items() if c.von_neumann_ratio < MIN_VON_NEUMANN_RATIO}
+        if bad:
+            shown = ", ".join(f"{k!r} {r:.3g}" for k, r in bad.items())
+            raise IdentificationError(
+                f"not a resting log: after removing the drift, column(s) {shown} have a von Neumann ratio (mean "
+                f"square successive difference / variance) below {MIN_VON_NEUMANN_RATIO:g}; white sensor noise gives "
+                "about 2, steps or a staircase (a PWM or thrust log?) give nearly 0; expected samples of sensors at "
+                "rest (--no-stationarity-check to use them anyway)")
     return NoiseEstimate(out, t, detrend, 1.0 / h)
 
 

@@ -1,9 +1,9 @@
-"""Thrust curves from a load-cell staircase or a static table (SPEC sections 3 and 9.1).
+"""Thrust curves from a load-cell staircase or a static table (Sandøy 2016, ch. 2, sec. 2.3).
 
 The rig steps the PWM set-point (1300 -> 1700 us in 10 us steps, 30 s each in the thesis). The
 force log is low-pass filtered (zero-phase 2nd-order Butterworth), the mean of the last
 ``window_s`` = 5 s of every step is taken as the thrust for that command, and the dead-band
-curve of SPEC section 3 is fitted by least squares, forward and reverse:
+curve of Sandøy 2016, ch. 2 is fitted by least squares, forward and reverse:
 
     s = u - d (u > d),  s = u + d (u < -d),  u = pwm_us - neutral
     f = K_L s + K_NL s |s|    (K_L, K_NL from the forward or the reverse set; f = 0 for |u| <= d)
@@ -26,7 +26,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rovlab.ident.fitting import IdentificationError, covariance_from_jacobian, lowpass, sample_rate
-from rovlab.io.tables import DataTable, read_table
+from rovlab.io.tables import require_increasing, DataTable, read_table
 from rovlab.params.vehicle import QuadraticCurve
 
 KGF = 9.80665  # N per kilogram-force
@@ -57,7 +57,7 @@ class StepMeans:
 
 @dataclass(frozen=True, eq=False)
 class ThrustFit:
-    """Dead-band quadratic thrust curve with standard errors and residuals (SPEC section 3)."""
+    """Dead-band quadratic thrust curve with standard errors and residuals (Sandøy 2016, ch. 2)."""
 
     K_L_pos: float  # [N/us]
     K_NL_pos: float  # [N/us^2]
@@ -96,7 +96,7 @@ class ThrustFit:
 
 
 def curve_force(u: np.ndarray, d: float, klp: float, knlp: float, kln: float, knln: float) -> np.ndarray:
-    """f(u) of SPEC section 3 for PWM offsets u = pwm - neutral [us]."""
+    """f(u) of Sandøy 2016, ch. 2 for PWM offsets u = pwm - neutral [us]."""
     u = np.asarray(u, dtype=float)
     sp = np.maximum(u - d, 0.0)
     sn = np.minimum(u + d, 0.0)
@@ -109,7 +109,7 @@ def curve_force(u: np.ndarray, d: float, klp: float, knlp: float, kln: float, kn
 
 def step_means(time_s: np.ndarray, pwm_us: np.ndarray, force_n: np.ndarray, *, window_s: float = 5.0,
                cutoff_hz: float = 1.0, pair: int = 1, tol_us: float = 0.5) -> StepMeans:
-    """Mean filtered force over the last ``window_s`` of each PWM step (SPEC 9.1).
+    """Mean filtered force over the last ``window_s`` of each PWM step (Sandøy 2016, sec. 2.3).
 
     A step is a run of consecutive samples whose set-point stays within ``tol_us``. Steps shorter
     than the window are skipped (listed in ``skipped_us``).
@@ -260,7 +260,7 @@ def fit_thrust_log(time_s: np.ndarray, pwm_us: np.ndarray, force_n: np.ndarray, 
                    deadband_us: float | None = DEFAULT_DEADBAND_US,
                    pwm_range: tuple[float, float] | None = None,
                    max_force_n: float | None = None) -> ThrustFit:
-    """Load-cell staircase log -> steady points -> curve fit (SPEC 9.1)."""
+    """Load-cell staircase log -> steady points -> curve fit (Sandøy 2016, sec. 2.3)."""
     steps = step_means(time_s, pwm_us, force_n, window_s=window_s, cutoff_hz=cutoff_hz, pair=pair)
     return fit_thrust_curve(steps.pwm_us, steps.force_n, neutral_us=neutral_us, deadband_us=deadband_us,
                             pwm_range=pwm_range, max_force_n=max_force_n, pair=pair, steps=steps)
@@ -275,7 +275,9 @@ LOG_COLUMNS = ("time_s", "pwm_us", "force_n")
 
 def read_thrust_log(path: str | Path) -> DataTable:
     """A load-cell log with columns time_s, pwm_us, force_n (clear errors otherwise)."""
-    return read_table(path, required=LOG_COLUMNS, what="thrust log")
+    table = read_table(path, required=LOG_COLUMNS, what="thrust log")
+    require_increasing(table, "time_s")
+    return table
 
 
 def read_thrust_table(path: str | Path) -> tuple[np.ndarray, np.ndarray, str]:

@@ -1,11 +1,11 @@
-"""Damping from towing-carriage runs (SPEC section 9.2; thesis sec. 4.3.1).
+"""Damping from towing-carriage runs (Sandøy 2016, sec. 4.3.1).
 
 Each run tows the vehicle at one constant speed (five positive and five negative speeds in
 [-0.5, 0.5] m/s per DOF in the thesis). Per run, the steady window is found on the speed trace,
 the load cell is tared with the mean force at rest before the run starts and after it ends
 (removes the cell's offset and, in heave, the net buoyancy), and the mean force over the window is the steady force.
 Runs of the rig alone (same file format) give the rig's own drag, fitted with the same terms
-and subtracted. Then, with SNAME signs (SPEC section 1),
+and subtracted. Then, with SNAME signs (Fossen 2011; Sandøy 2016, sec. 3.1),
 
     force_n = -(X_u u + X_|u|u |u| u + X_uuu u^3)        (force the rig applies to the vehicle)
 
@@ -211,8 +211,32 @@ def identify_towing(table: DataTable, rig: DataTable | None = None, *, terms: Se
     return fit_steady_damping(pts, rig_pts, terms=terms, dof=dof, what="towing")
 
 
+SPEED_COLUMNS = {"u_mps": "surge", "v_mps": "sway", "w_mps": "heave"}
+
+
 def read_towing(path: str | Path) -> DataTable:
-    return read_table(path, required=COLUMNS, what="towing log")
+    """A towing log. The speed column is ``speed_mps``, or ``u_mps`` / ``v_mps`` / ``w_mps``, which
+    also say the DOF (read back by :func:`dof_of_log`)."""
+    table = read_table(path, what="towing log")
+    named = [c for c in SPEED_COLUMNS if table.has(c)]
+    if len(named) == 1 and not table.has("speed_mps"):
+        col = named[0]
+        data = {("speed_mps" if k == col else k): v for k, v in table.data.items()}
+        columns = tuple("speed_mps" if c == col else c for c in table.columns)
+        table = DataTable(table.file, columns, data, table.lines,
+                          table.comments + (f"dof = {SPEED_COLUMNS[col]}",))
+    table.require(*COLUMNS)
+    return table
+
+
+def dof_of_log(table: DataTable) -> str | None:
+    """The DOF a towing log says it is (a u/v/w_mps speed column, or the virtual lab's
+    ``# setting.dof = ...`` line), None if it does not say."""
+    meta = table.meta()
+    for key in ("dof", "setting.dof"):
+        if meta.get(key) in DOFS:
+            return meta[key]
+    return None
 
 
 def damping_edits(fit: DampingFit, dof: str, *, digits: int = 4) -> dict[str, float]:

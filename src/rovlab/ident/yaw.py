@@ -1,4 +1,4 @@
-"""Yaw damping from constant-moment runs (SPEC section 9.3; thesis sec. 4.3.2).
+"""Yaw damping from constant-moment runs (Sandøy 2016, sec. 4.3.2).
 
 The allocation applies a constant yaw moment (0.25, 0.5, 0.75, 1 and 2 N m in the thesis) and the
 vehicle spins up to a steady yaw rate, where

@@ -42,13 +42,15 @@ def _cmd_hmi(args: argparse.Namespace) -> int:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
     session = Session.simulation(args.scenario, vehicle=args.vehicle, config=args.config, seed=args.seed,
                                  out_dir=Path(args.out), speed=args.speed, running=not args.paused)
+    served: list[bool] = []  # set once the server listens: before that nobody could log anything
     try:
-        return asyncio.run(_serve(session, args.port))
+        return asyncio.run(_serve(session, args.port, served))
     finally:
-        _write_log(session)
+        if served:
+            _write_log(session)
 
 
-async def _serve(session, port: int) -> int:
+async def _serve(session, port: int, served: list[bool]) -> int:
     from rovlab.interfaces.cli import UserError
     from rovlab.interfaces.hmi.server import HmiServer
 
@@ -59,6 +61,7 @@ async def _serve(session, port: int) -> int:
         await server.stop()
         raise UserError(f"cannot listen on 127.0.0.1:{port}: {exc.strerror or exc} "
                         "(use --port 0 for a free port)") from None
+    served.append(True)
     src = session.source.describe()
     print(f"rovlab hmi: {src['scenario']['name']} with {src['vehicle']} / {src['config']} "
           f"({'running' if session.running else 'paused'}, {session.speed:g}x real time)")

@@ -1,11 +1,12 @@
-"""Sub-commands ``identify``, ``added-mass`` and ``lab`` (SPEC section 9; docs/identification.md).
+"""Sub-commands ``identify``, ``added-mass`` and ``lab`` (Sandøy 2016, sec. 2.3 and ch. 4; docs/identification.md).
 
 Interfaces hold no maths: these read files, call :mod:`rovlab.ident`, print the result (a table,
 or JSON with ``--json``), draw the fit's PNG and, with ``--update``, write the estimates into a
 vehicle file through :mod:`rovlab.params.edit` (validated before anything is written).
 
-Plots: by default each ``identify`` writes ``<input stem>-<tool>.png`` next to the input file
-(``--plot PNG`` to choose, ``--no-plot`` to skip); ``added-mass`` plots only with ``--plot``.
+Plots: by default each ``identify`` writes ``<input stem>-<tool>.png`` into the working directory
+(never next to the input, which may be packaged data inside the installed package; ``--plot PNG``
+to choose, ``--no-plot`` to skip); ``added-mass`` plots only with ``--plot``.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import argparse
 import datetime as _dt
 import json
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any, Callable
@@ -61,13 +63,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     common.add_argument("--plot", metavar="PNG", help="write the fit's figure here (default: <input stem>-<tool>.png "
-                        "next to the input file)")
+                        "in the working directory)")
     common.add_argument("--no-plot", action="store_true", help="do not write a figure")
     common.add_argument("--update", metavar="VEHICLE.toml",
                         help="write the estimates into this vehicle file (comments kept, source note added, "
                              "validated before writing)")
 
-    ident = sub.add_parser("identify", help="identify vehicle parameters from lab data (SPEC 9)",
+    ident = sub.add_parser("identify", help="identify vehicle parameters from lab data (Sandøy 2016, sec. 2.3 and ch. 4)",
                            description="Identify vehicle parameters from the logs of the lab experiments. " + SIGN_NOTE)
     isub = ident.add_subparsers(dest="ident_command", metavar="EXPERIMENT")
     isub.required = True
@@ -98,7 +100,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file")
     p.add_argument("--rig", metavar="FILE", help="rig-only runs (same columns) whose drag is subtracted")
     p.add_argument("--terms", default="linear,quadratic,cubic", help="terms to fit (default linear,quadratic,cubic)")
-    p.add_argument("--dof", choices=("surge", "sway", "heave"), default="surge", help="DOF towed (for --update)")
+    p.add_argument("--dof", choices=("surge", "sway", "heave"),
+                   help="DOF towed; required unless the log says it: a speed column u_mps (surge), v_mps (sway) "
+                        "or w_mps (heave) instead of speed_mps, or the virtual lab's '# setting.dof' line")
     p.add_argument("--min-steady", type=_positive, default=2.0, metavar="S", help="shortest usable steady window (2 s)")
     p.add_argument("--trim", type=_nonnegative, default=1.0, metavar="S", help="seconds cut from each end of a window (1)")
     p.add_argument("--no-tare", action="store_true", help="do not subtract the force at rest around each run")
@@ -134,9 +138,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detrend", type=int, default=1, choices=(0, 1, 2, 3),
                    help="degree of the drift polynomial removed (1: linear)")
     p.add_argument("--allan", action="store_true", help="also compute the Allan deviation")
+    p.add_argument("--no-stationarity-check", action="store_true",
+                   help="accept channels that do not look like noise at rest (steps, a staircase, wandering)")
     p.set_defaults(func=_cmd_noise)
 
-    am = sub.add_parser("added-mass", help="added mass from box geometry (DNV-RP-H103, SPEC 9.4)",
+    am = sub.add_parser("added-mass", help="added mass from box geometry (DNV-RP-H103, Sandøy 2016, sec. 4.2.1)",
                         description="Eidsvik's empirical method on DNV-RP-H103 tables. Give the six dimensions "
                                     "or --vehicle to use its [geometry]. " + SIGN_NOTE)
     for name, unit in (("length", "M"), ("width", "M"), ("height", "M"), ("area-front", "M2"), ("area-side", "M2"),
@@ -213,13 +219,22 @@ def _user_error(msg: str) -> Exception:
 
 def _run(file: str, fn: Callable[[], Any]) -> Any:
     """Call an identification, turning its IdentificationError into a clean user error."""
+    import numpy as np
+
     from rovlab.ident.fitting import IdentificationError
 
     try:
-        return fn()
+        # The readers refuse implausible magnitudes; should a fit still overflow or divide by
+        # zero, stop with a message instead of a traceback or NaN estimates (and keep LAPACK from
+        # printing its own complaints about non-finite input).
+        with np.errstate(over="raise", divide="raise", invalid="raise", under="ignore"):
+            return fn()
     except IdentificationError as exc:
         text = str(exc)  # messages about a run already start with the file's name
         raise _user_error(text if text.startswith(f"{file}:") else f"{file}: {text}") from None
+    except (FloatingPointError, ZeroDivisionError, OverflowError, np.linalg.LinAlgError) as exc:
+        raise _user_error(f"{file}: the data cannot be fitted ({type(exc).__name__}: {exc}); expected a log of "
+                          "the experiment in SI units (check the columns' units and scaling)") from None
 
 
 def _clean(x: Any) -> Any:
@@ -243,7 +258,8 @@ def _emit(args: argparse.Namespace, data: dict[str, Any], text: str) -> None:
 
 
 def _plot(args: argparse.Namespace, tool: str, draw: Callable[[Path], Any]) -> str | None:
-    """Write the figure (default next to the input file); a missing matplotlib only warns."""
+    """Write the figure (default: ``<input stem>-<tool>.png`` in the working directory); a missing
+    matplotlib only warns."""
     from rovlab.ident import plots
     from rovlab.ident.plots import PlotUnavailable
 
@@ -252,8 +268,7 @@ def _plot(args: argparse.Namespace, tool: str, draw: Callable[[Path], Any]) -> s
     if args.plot:
         path = Path(args.plot)
     elif getattr(args, "file", None):
-        src = Path(args.file)
-        path = src.with_name(f"{src.stem}-{tool}.png")
+        path = Path(f"{Path(args.file).stem}-{tool}.png")
     else:
         return None
     if path.suffix.lower() not in plots.FORMATS:
@@ -282,6 +297,10 @@ def _check_update_target(path: str) -> Path:
     pkg = packaged_vehicle_path("x").parent.resolve()
     if p.resolve().parent == pkg:
         raise _user_error(f"--update: {path} is a packaged vehicle file; copy it and update the copy")
+    if not p.is_file():
+        raise _user_error(f"--update: {path} is not a file; expected a vehicle TOML file")
+    if not os.access(p, os.W_OK):
+        raise _user_error(f"--update: {path} is read-only; expected a vehicle file you may write (nothing was written)")
     return p
 
 
@@ -292,7 +311,11 @@ def _update(args: argparse.Namespace, edits: dict[str, Any], blocks: list[str], 
 
     target = _check_update_target(args.update)
     note = f"{what} ({_dt.date.today().isoformat()})"
-    edit_vehicle_file(target, edits, sources={b: note for b in blocks})
+    try:
+        edit_vehicle_file(target, edits, sources={b: note for b in blocks})
+    except OSError as exc:  # a read-only folder, a full disk: the file is left as it was
+        raise _user_error(f"--update: cannot write {target}: {exc.strerror or exc}; the file is unchanged "
+                          "(nothing was written)") from None
     print(f"updated {target}: " + ", ".join(k for k, v in edits.items() if not _is_delete(v))
           + f"; source note: {note}", file=sys.stderr)
     return str(target)
@@ -410,6 +433,7 @@ def _cmd_towing(args: argparse.Namespace) -> int:
 
     table = towing.read_towing(args.file)
     rig = towing.read_towing(args.rig) if args.rig else None
+    args.dof = _towing_dof(args, table)
     fit = _run(args.file, lambda: towing.identify_towing(table, rig, terms=_terms(args.terms), dof=args.dof,
                                                          min_s=args.min_steady, trim_s=args.trim,
                                                          tare=not args.no_tare))
@@ -421,6 +445,24 @@ def _cmd_towing(args: argparse.Namespace) -> int:
     text = _damping_text(fit, args.file, f"{args.dof} damping (SNAME)") + (f"\n  figure: {png}" if png else "")
     _emit(args, data, text)
     return 0
+
+
+def _towing_dof(args: argparse.Namespace, table) -> str:
+    """The towed DOF: --dof, or what the log says. Never a silent default (a heave log used to be
+    reported, and written with --update, as surge)."""
+    from rovlab.ident import towing
+
+    found = towing.dof_of_log(table)
+    if args.dof is None:
+        if found is None:
+            raise _user_error(f"{args.file}: which DOF was towed? the log does not say (its speed column is "
+                              "speed_mps, not u_mps, v_mps or w_mps, and it has no '# setting.dof' line); "
+                              "expected --dof surge, --dof sway or --dof heave")
+        return found
+    if found is not None and found != args.dof:
+        raise _user_error(f"{args.file}: --dof {args.dof}, but the log says it is a {found} towing log; expected "
+                          f"--dof {found} (or no --dof)")
+    return args.dof
 
 
 def _cmd_yaw(args: argparse.Namespace) -> int:
@@ -497,7 +539,8 @@ def _cmd_noise(args: argparse.Namespace) -> int:
     from rovlab.ident import noise, plots
 
     table, cols = noise.read_noise(args.file)
-    est = _run(args.file, lambda: noise.noise_variances(table["time_s"], cols, detrend=args.detrend, allan=args.allan))
+    est = _run(args.file, lambda: noise.noise_variances(table["time_s"], cols, detrend=args.detrend, allan=args.allan,
+                                                        check_stationary=not args.no_stationarity_check))
     png = _plot(args, "noise", lambda p: plots.plot_noise(est, p, title=f"Resting log {Path(args.file).name}: "
                                                                         f"drift (degree {args.detrend}) removed"))
     updated = None
@@ -552,7 +595,7 @@ def _cmd_added_mass(args: argparse.Namespace) -> int:
                       "rovlab added-mass: Eidsvik/DNV-RP-H103 from L, W, H = "
                       f"{dims['length']:g}, {dims['width']:g}, {dims['height']:g} m")
     data = est.as_dict() | {"inputs": dims | {"rho": rho}, "plot": png, "updated": updated}
-    lines = ["added mass (SNAME; Eidsvik's method on DNV-RP-H103 tables, SPEC 9.4)",
+    lines = ["added mass (SNAME; Eidsvik's method on DNV-RP-H103 tables, Sandøy 2016, sec. 4.2.1)",
              f"  X_udot = {est.X_udot:9.4f} kg", f"  Y_vdot = {est.Y_vdot:9.4f} kg",
              f"  Z_wdot = {est.Z_wdot:9.4f} kg", f"  N_rdot = {est.N_rdot:9.4f} kg m^2",
              f"  lambda = {est.scale:.4f}; c_xy = {est.c_xy:.4f}, c_yz = {est.c_yz:.4f}, c_xz = {est.c_xz:.4f}",

@@ -65,25 +65,35 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     result, metrics, notes = _run_and_write(data, file, args.seed, out, figures=not args.no_figures)
     sc = result.scenario
     print(f"{sc.name} (seed {sc.seed}, {sc.plant} plant, {sc.duration_s:g} s) -> {out}/")
+    interrupted = False
     if args.runs > 1:
         summary = _monte_carlo(data, file, sc.seed, args.runs, args.workers, args.backend, args.scheduler, out,
                                result, metrics, notes)
         _print_mc(summary)
+        interrupted = bool(summary.get("interrupted"))
     _print_summary([(sc.name, metrics)])
     for n in notes:
         print(f"note: {n}", file=sys.stderr)
-    return 0
+    return 130 if interrupted else 0  # Ctrl-C: the finished runs are written, the status says it stopped
 
 
 def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
+    from rovlab.interfaces.cli import UserError
     from rovlab.sim.output import write_run
-    from rovlab.sim.runner import prepare, run_prepared, summarise
+    from rovlab.sim.runner import PlantDiverged, prepare, run_prepared, summarise
 
     prep = prepare(data, file=file, seed=seed)
-    result = run_prepared(prep)
+    try:
+        result = run_prepared(prep)
+    except PlantDiverged as exc:
+        raise UserError(f"{file}: {exc}") from None
     metrics = summarise(result)
     notes: list[str] = []
-    write_run(out, result, metrics, figures=figures, report=figures, notes=notes)
+    try:
+        write_run(out, result, metrics, figures=figures, report=figures, notes=notes)
+    except OSError as exc:
+        raise UserError(f"cannot write the results to {out}/: {exc.strerror or exc} "
+                        f"({exc.filename or out}); choose another --out") from None
     return result, metrics, notes
 
 

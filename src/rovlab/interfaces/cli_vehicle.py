@@ -109,7 +109,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
         "sources": dict(v.sources),
     }
     if args.json:
-        print(json.dumps(info, indent=2))
+        print(_json(info, indent=2))
         return 0
     print(f"{v.name}: {v.description}")
     print(f"  file        {v.file}")
@@ -175,7 +175,7 @@ def _cmd_thruster(args: argparse.Namespace) -> int:
         out = {"thruster": t.name, "pwm_us": args.pwm, "force": force_from_pwm(t, args.pwm),
                "saturated": saturated}
     if args.json:
-        print(json.dumps(out))
+        print(_json(out))
         return 0
     if args.force is not None:
         print(f"{t.name}: {args.force:g} N -> {out['pwm_us']:.2f} us")
@@ -205,7 +205,7 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
         alloc = Allocator(v, compiled=False)
     res = alloc.allocate(np.array(args.wrench))
     if args.json:
-        print(json.dumps(res.as_dict()))
+        print(_json(res.as_dict()))
         return 0
     print(f"{v.name}: allocation ({args.mode})")
     print("  DOF   demanded   achieved")
@@ -223,3 +223,23 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
 
 
 __all__ = ["register", "ConfigError"]
+
+
+def _finite(obj: Any) -> Any:
+    """JSON has no Infinity or NaN: non-finite numbers become null (e.g. an unbounded limit)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _finite(obj.tolist())
+    if isinstance(obj, np.generic):
+        return _finite(obj.item())
+    return obj
+
+
+def _json(obj: Any, **kw: Any) -> str:
+    """Strict JSON (RFC 8259): never prints Infinity or NaN."""
+    return json.dumps(_finite(obj), allow_nan=False, **kw)

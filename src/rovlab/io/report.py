@@ -17,6 +17,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from rovlab.core.angles import wrap
+
 _DEG = 180.0 / math.pi
 
 
@@ -102,7 +104,7 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
             continue
         err = est - true
         if s == "psi":
-            err = np.pi - np.mod(np.pi - err, 2 * np.pi)
+            err = wrap(err)
         ax.plot(t, err * k, color="tab:red", lw=1.0, label="estimate - truth")
         if var is not None:
             sd = 2 * np.sqrt(np.maximum(var, 0)) * k

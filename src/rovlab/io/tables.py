@@ -21,15 +21,47 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from rovlab.params.edit import atomic_write_text
+from rovlab.core.files import atomic_write_text
 from rovlab.params.validate import ConfigError, Problem
 
 _MAX_PROBLEMS = 20  # stop collecting after this many bad cells (the rest are likely the same)
 
-# A number as C, CSV readers and spreadsheets write one: ASCII digits, optional sign, point and
+# A number as a lab instrument writes it: ASCII digits, optional sign, decimal point and
+# exponent. Python's float() also takes '1_000' and '１２' (other scripts' digits); those are
+# refused, as is anything that is not finite.
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:inf|infinity|nan)",
+                     re.IGNORECASE | re.ASCII)
+
+# Plausible magnitudes of a lab log's values, by the unit suffix of the column name (SI; see
+# docs/identification.md). A fuzzer's times or positions scaled by 1e154 or 1e-300 used to end in
+# overflows, a ZeroDivisionError or an SVD failure deep in the fits.
+COLUMN_LIMITS: dict[str, float] = {
+    "_s": 1e8,  # time [s]: about three years
+    "_us": 1e4,  # PWM [us]
+    "_n": 1e5,  # force [N]
+    "_kgf": 1e4,  # force [kgf]
+    "_nm": 1e4,  # moment [N m]
+    "_m": 1e4,  # position [m]
+    "_mps": 100.0,  # speed [m/s]
+    "_rad": 1e6,  # angle, unwrapped [rad]
+}
+DEFAULT_LIMIT = 1e9  # other columns (sensor channels of a resting log, run numbers)
+TINY = 1e-30  # a non-zero value smaller than this is no instrument's reading: scaled data
+MIN_SAMPLE_INTERVAL_S = 1e-6  # time steps below 1 us: not a lab log (or time in the wrong unit)
+
+
+def column_limit(name: str) -> float:
+    """The largest plausible magnitude of a column's values (by its unit suffix)."""
+    for suffix, limit in COLUMN_LIMITS.items():
+        if name.endswith(suffix):
+            return limit
+    return DEFAULT_LIMIT
+
+
+# A number in a log (rovlab filter; io/logs.py), as C, CSV readers and spreadsheets write one: ASCII digits, optional sign, point and
 # exponent, or inf/infinity. Python's float() also takes '1_000' and non-ASCII digits ('１２'),
 # which no other tool reads as numbers: such cells are refused.
-_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:inf|infinity))")
+_LOG_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:inf|infinity))")
 NUMBER_EXPECTED = "a number (ASCII digits, e.g. 1.5e-3; or empty / nan for no value)"
 RANGE_EXPECTED = "a number within +-1.8e308 (inf is written inf)"
 
@@ -40,7 +72,7 @@ def parse_number(text: str) -> float | None:
     Overflowing literals such as ``1e400`` are not numbers (they would silently become inf, which
     in a log means a faulty sample): None too; the caller words the refusal.
     """
-    if not _NUMBER.fullmatch(text):
+    if not _LOG_NUMBER.fullmatch(text):
         return None
     x = float(text)
     if math.isinf(x) and "n" not in text.lower():
@@ -50,7 +82,7 @@ def parse_number(text: str) -> float | None:
 
 def number_problem(text: str) -> str:
     """What was expected of a cell that parse_number refused."""
-    return RANGE_EXPECTED if _NUMBER.fullmatch(text) else NUMBER_EXPECTED
+    return RANGE_EXPECTED if _LOG_NUMBER.fullmatch(text) else NUMBER_EXPECTED
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,6 +226,7 @@ def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "d
         raise ConfigError([Problem(file, "", "no data rows", "at least one row of numbers after the header")], what)
 
     n = len(header)
+    limits = [column_limit(name) for name in header]
     values = np.empty((len(rows), n))
     for r, (cells, number) in enumerate(zip(rows, row_lines)):
         if len(cells) > n and not any(cells[n:]):
@@ -203,15 +236,20 @@ def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "d
                                     f"{n} values, one per column ({', '.join(header)})"))
         else:
             for c, cell in enumerate(cells):
-                x = parse_number(cell)
-                if x is None:  # also '1_000', full-width digits and 1e400, which float() would take
-                    problems.append(Problem(file, f"line {number}, column {header[c]!r}", cell or "(empty)",
-                                            "a finite number" if number_problem(cell) == RANGE_EXPECTED
-                                            or cell.lower().lstrip("+-") == "nan" else "a number"))
+                where = f"line {number}, column {header[c]!r}"
+                if not _NUMBER.fullmatch(cell):
+                    problems.append(Problem(file, where, cell or "(empty)", "a number (ASCII digits, e.g. 1000 "
+                                            "or 1.5e-3)"))
                     continue
+                x = float(cell)
                 if not math.isfinite(x):
-                    problems.append(Problem(file, f"line {number}, column {header[c]!r}", cell,
-                                            "a finite number"))
+                    problems.append(Problem(file, where, cell, "a finite number"))
+                elif abs(x) > limits[c]:
+                    problems.append(Problem(file, where, cell, f"a magnitude of at most {limits[c]:g} (the "
+                                            "plausible range of this column's unit, docs/identification.md)"))
+                elif x != 0 and abs(x) < TINY:
+                    problems.append(Problem(file, where, cell, f"0 or a magnitude of at least {TINY:g} (smaller "
+                                            "is below any instrument's resolution: were the values scaled?)"))
                 values[r, c] = x
         if len(problems) >= _MAX_PROBLEMS:
             problems.append(Problem(file, "", "more bad rows", "(stopped after the first "
@@ -268,9 +306,9 @@ def split_runs(table: DataTable, column: str = "run") -> list[tuple[int, DataTab
     A run's rows need not be contiguous in the file, but each run's time must increase.
     """
     ids = table[column]
-    bad = np.flatnonzero(ids != np.round(ids))
+    bad = np.flatnonzero((ids != np.round(ids)) | (np.abs(ids) > 1e9))
     if bad.size:
-        raise table.problem(int(bad[0]), column, float(ids[bad[0]]), "an integer run number")
+        raise table.problem(int(bad[0]), column, float(ids[bad[0]]), "an integer run number (|run| <= 1e9)")
     order: list[int] = []
     seen: set[int] = set()
     for x in ids.astype(int):
@@ -288,3 +326,8 @@ def require_increasing(table: DataTable, column: str = "time_s") -> None:
         i = int(bad[0]) + 1
         raise table.problem(i, column, float(x[i]), f"a value greater than the previous row's {float(x[i - 1]):g} "
                             "(time must increase)")
+    bad = np.flatnonzero(np.diff(x) < MIN_SAMPLE_INTERVAL_S)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise table.problem(i, column, float(x[i]), f"a time at least {MIN_SAMPLE_INTERVAL_S:g} s after the previous "
+                            f"row's {float(x[i - 1]):.17g} (samples closer than that: time in seconds?)")

@@ -1,7 +1,7 @@
-"""Time-series logs of a run (simulated or real): CSV and MCAP writers.
+"""Time-series logs of a run (simulated or real) as MCAP.
 
-A log is an ordered mapping column name -> 1-D array of equal length, with ``time_s`` first.
-NaN is written as an empty CSV cell ("no sample"). The MCAP file holds the same rows as JSON
+A log is an ordered mapping column name -> 1-D array of equal length, with ``time_s`` first (its
+CSV form is written by :func:`rovlab.io.logs.write_csv`). The MCAP file holds the same rows as JSON
 messages on a few topics (the message layout of :mod:`rovlab.io.messages`), readable by Foxglove
 and other robotics tools.
 """
@@ -9,34 +9,13 @@ and other robotics tools.
 from __future__ import annotations
 
 import json
-import math
-import os
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
+from rovlab.core.files import atomic_open
 from rovlab.io.messages import TOPICS, rows_to_messages
-
-
-def _fmt(x: float) -> str:
-    if math.isnan(x):
-        return ""
-    return repr(float(x))
-
-
-def write_csv(path: str | Path, columns: Mapping[str, np.ndarray]) -> Path:
-    """Write columns to CSV atomically (temporary file + rename); NaN -> empty cell."""
-    path = Path(path)
-    names = list(columns)
-    data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names]) if names else np.zeros((0, 0))
-    tmp = path.with_name(path.name + ".part")
-    with tmp.open("w", encoding="utf-8", newline="") as fh:
-        fh.write(",".join(names) + "\n")
-        for row in data:
-            fh.write(",".join(_fmt(x) for x in row) + "\n")
-    os.replace(tmp, path)
-    return path
 
 
 def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata: Mapping[str, str] | None = None) -> Path:
@@ -46,8 +25,7 @@ def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata:
     except ImportError as exc:  # pragma: no cover - optional extra
         raise RuntimeError("writing MCAP needs the 'mcap' package: pip install 'rovlab[log]'") from exc
     path = Path(path)
-    tmp = path.with_name(path.name + ".part")
-    with tmp.open("wb") as fh:
+    with atomic_open(path, "wb") as fh:
         writer = Writer(fh, compression=CompressionType.NONE)
         writer.start(profile="", library="rovlab")
         channel_ids: dict[str, int] = {}
@@ -62,5 +40,4 @@ def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata:
             writer.add_message(channel_ids[topic], log_time=stamp, data=json.dumps(msg).encode(),
                                publish_time=stamp, sequence=seq)
         writer.finish()
-    os.replace(tmp, path)
     return path

@@ -11,6 +11,8 @@ paths (``nu_dot``, ``plant_rhs``, ``rk4_step``) run on a packed parameter vector
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -111,54 +113,117 @@ def pack(vehicle: Vehicle) -> np.ndarray:
     return p
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, inline="always")
+def rhs_into(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, out):
+    """Time derivative of x = [eta; nu] (8) into ``out`` for the total force f = tau + b (+ noise).
+
+    The one right-hand side of the process model: the simulator's RK4, :func:`nu_dot_packed`,
+    :func:`plant_rhs` and the model API all evaluate this function. Scalars in, so compiled
+    callers need no temporary arrays.
+    """
+    c, s = math.cos(x3), math.sin(x3)
+    out[0] = c * x4 - s * x5
+    out[1] = s * x4 + c * x5
+    out[2] = x6
+    out[3] = x7
+    m = p[P_M]
+    a = m * (x5 + p[P_XG] * x7)
+    cc = m * (x4 - p[P_YG] * x7)
+    # f - C(nu) nu - D(nu) nu - g (damping coefficients carry their negative SNAME sign)
+    g0 = f0 - (-a + p[P_YVDOT] * x5) * x7 + (p[P_LIN] + p[P_QUAD] * abs(x4) + p[P_CUB] * x4 * x4) * x4
+    g1 = f1 - (cc - p[P_XUDOT] * x4) * x7 + (p[P_LIN + 1] + p[P_QUAD + 1] * abs(x5) + p[P_CUB + 1] * x5 * x5) * x5
+    g2 = f2 - p[P_GZ] + (p[P_LIN + 2] + p[P_QUAD + 2] * abs(x6) + p[P_CUB + 2] * x6 * x6) * x6
+    g3 = (f3 - ((a - p[P_YVDOT] * x5) * x4 + (-cc + p[P_XUDOT] * x4) * x5)
+          + (p[P_LIN + 3] + p[P_QUAD + 3] * abs(x7) + p[P_CUB + 3] * x7 * x7) * x7)
+    for i in range(4):
+        out[4 + i] = (p[P_MINV + 4 * i] * g0 + p[P_MINV + 4 * i + 1] * g1
+                      + p[P_MINV + 4 * i + 2] * g2 + p[P_MINV + 4 * i + 3] * g3)
+
+
+@njit(cache=True)
+def jacobian_into(p, x, A):
+    """Analytic Jacobian A = df/dx (8 x 8) of :func:`rhs_into` at x (the force enters affinely:
+    df/dtau = [0; M^-1]). Compiled, for an EKF's prediction inside the simulator loop."""
+    u, v, r = x[4], x[5], x[7]
+    m = p[P_M]
+    x_g, y_g = p[P_XG], p[P_YG]
+    Xu, Yv = p[P_XUDOT], p[P_YVDOT]
+    for i in range(8):
+        for j in range(8):
+            A[i, j] = 0.0
+    c, s = math.cos(x[3]), math.sin(x[3])
+    A[0, 3] = -s * u - c * v
+    A[1, 3] = c * u - s * v
+    A[0, 4] = c
+    A[0, 5] = -s
+    A[1, 4] = s
+    A[1, 5] = c
+    A[2, 6] = 1.0
+    A[3, 7] = 1.0
+    # G = d(-C(nu) nu - D(nu) nu)/d nu, rows X, Y, Z, N
+    G = np.zeros((4, 4))
+    G[0, 1] = -(-m + Yv) * r
+    G[0, 3] = -(-m * (v + 2 * x_g * r) + Yv * v)
+    G[1, 0] = -(m - Xu) * r
+    G[1, 3] = -(m * (u - 2 * y_g * r) - Xu * u)
+    G[3, 0] = -(m * x_g * r + (Xu - Yv) * v)
+    G[3, 1] = -((Xu - Yv) * u + m * y_g * r)
+    G[3, 3] = -(m * (x_g * u + y_g * v))
+    for i in range(4):
+        nu_i = x[4 + i]
+        G[i, i] += p[P_LIN + i] + 2.0 * p[P_QUAD + i] * abs(nu_i) + 3.0 * p[P_CUB + i] * nu_i * nu_i
+    for i in range(4):
+        for j in range(4):
+            acc = 0.0
+            for k in range(4):
+                acc += p[P_MINV + 4 * i + k] * G[k, j]
+            A[4 + i, 4 + j] = acc
+
+
+@njit(cache=True)
 def nu_dot_packed(p: np.ndarray, nu: np.ndarray, tau: np.ndarray, b: np.ndarray) -> np.ndarray:
     """nu_dot = M^-1 (tau + b - C(nu) nu - D(nu) nu - g) on a packed parameter vector."""
-    u, v, r = nu[0], nu[1], nu[3]
-    m = p[P_M]
-    a = m * (v + p[P_XG] * r)
-    c = m * (u - p[P_YG] * r)
-    # C(nu) nu = (C_RB + C_A) nu
-    cx = (-a + p[P_YVDOT] * v) * r
-    cy = (c - p[P_XUDOT] * u) * r
-    cn = (a - p[P_YVDOT] * v) * u + (-c + p[P_XUDOT] * u) * v
-    f = np.empty(4)
-    f[0] = tau[0] + b[0] - cx
-    f[1] = tau[1] + b[1] - cy
-    f[2] = tau[2] + b[2] - p[P_GZ]
-    f[3] = tau[3] + b[3] - cn
-    for i in range(4):
-        x = nu[i]
-        f[i] += (p[P_LIN + i] + p[P_QUAD + i] * abs(x) + p[P_CUB + i] * x * x) * x
-    out = np.empty(4)
-    for i in range(4):
-        out[i] = (p[P_MINV + 4 * i] * f[0] + p[P_MINV + 4 * i + 1] * f[1]
-                  + p[P_MINV + 4 * i + 2] * f[2] + p[P_MINV + 4 * i + 3] * f[3])
-    return out
+    out = np.empty(8)
+    rhs_into(p, 0.0, 0.0, 0.0, 0.0, nu[0], nu[1], nu[2], nu[3],
+             tau[0] + b[0], tau[1] + b[1], tau[2] + b[2], tau[3] + b[3], out)
+    return out[4:].copy()
 
 
 @njit(cache=True)
 def plant_rhs(p: np.ndarray, x: np.ndarray, tau: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Time derivative of the 8-state x = [eta; nu] with force tau and bias b held fixed."""
     out = np.empty(8)
-    psi = x[3]
-    c, s = np.cos(psi), np.sin(psi)
-    out[0] = c * x[4] - s * x[5]
-    out[1] = s * x[4] + c * x[5]
-    out[2] = x[6]
-    out[3] = x[7]
-    out[4:] = nu_dot_packed(p, x[4:], tau, b)
+    rhs_into(p, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7],
+             tau[0] + b[0], tau[1] + b[1], tau[2] + b[2], tau[3] + b[3], out)
     return out
+
+
+@njit(cache=True)
+def rk4_inplace(p: np.ndarray, x: np.ndarray, f: np.ndarray, h: float, k: np.ndarray) -> None:
+    """One classical Runge-Kutta step of x (in place) with the force f held; k is (4, 8) work."""
+    f0, f1, f2, f3 = f[0], f[1], f[2], f[3]
+    rhs_into(p, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], f0, f1, f2, f3, k[0])
+    hh = 0.5 * h
+    rhs_into(p, x[0] + hh * k[0, 0], x[1] + hh * k[0, 1], x[2] + hh * k[0, 2], x[3] + hh * k[0, 3],
+             x[4] + hh * k[0, 4], x[5] + hh * k[0, 5], x[6] + hh * k[0, 6], x[7] + hh * k[0, 7], f0, f1, f2, f3, k[1])
+    rhs_into(p, x[0] + hh * k[1, 0], x[1] + hh * k[1, 1], x[2] + hh * k[1, 2], x[3] + hh * k[1, 3],
+             x[4] + hh * k[1, 4], x[5] + hh * k[1, 5], x[6] + hh * k[1, 6], x[7] + hh * k[1, 7], f0, f1, f2, f3, k[2])
+    rhs_into(p, x[0] + h * k[2, 0], x[1] + h * k[2, 1], x[2] + h * k[2, 2], x[3] + h * k[2, 3],
+             x[4] + h * k[2, 4], x[5] + h * k[2, 5], x[6] + h * k[2, 6], x[7] + h * k[2, 7], f0, f1, f2, f3, k[3])
+    h6 = h / 6.0
+    for i in range(8):
+        x[i] += h6 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
 
 
 @njit(cache=True)
 def rk4_step(p: np.ndarray, x: np.ndarray, tau: np.ndarray, b: np.ndarray, h: float) -> np.ndarray:
     """One classical Runge-Kutta step of length h (tau and b constant over the step)."""
-    k1 = plant_rhs(p, x, tau, b)
-    k2 = plant_rhs(p, x + 0.5 * h * k1, tau, b)
-    k3 = plant_rhs(p, x + 0.5 * h * k2, tau, b)
-    k4 = plant_rhs(p, x + h * k3, tau, b)
-    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    out = x.copy()
+    f = np.empty(4)
+    for i in range(4):
+        f[i] = tau[i] + b[i]
+    rk4_inplace(p, out, f, h, np.empty((4, 8)))
+    return out
 
 
 def nu_dot(vehicle: Vehicle, eta: np.ndarray, nu: np.ndarray, tau: np.ndarray,
@@ -191,33 +256,14 @@ def linearise(vehicle: Vehicle, eta0: np.ndarray, nu0: np.ndarray,
     """Analytic Jacobians A = df/dx, B = df/dtau of x_dot = f(x, tau), x = [eta; nu].
 
     The operating force tau0 does not enter the Jacobians (the model is affine in tau); it is
-    accepted so a call names the full operating point.
+    accepted so a call names the full operating point. Evaluated by the compiled
+    :func:`jacobian_into`, the same code an EKF runs inside the simulator.
     """
     del tau0
-    eta0 = np.asarray(eta0, dtype=float)
-    u, v, w, r = np.asarray(nu0, dtype=float)
-    nu = np.array([u, v, w, r])
-    m = vehicle.mass
-    x_g, y_g = vehicle.r_g[0], vehicle.r_g[1]
-    Xu, Yv = vehicle.added_mass[0], vehicle.added_mass[1]
-    # d(C(nu) nu)/d nu, rows X, Y, Z, N
-    dC = np.array([
-        [0.0, (-m + Yv) * r, 0.0, -m * (v + 2 * x_g * r) + Yv * v],
-        [(m - Xu) * r, 0.0, 0.0, m * (u - 2 * y_g * r) - Xu * u],
-        [0.0, 0.0, 0.0, 0.0],
-        [m * x_g * r + (Xu - Yv) * v, (Xu - Yv) * u + m * y_g * r, 0.0, m * (x_g * u + y_g * v)],
-    ])
-    dD = np.diag(vehicle.damping_linear + 2 * vehicle.damping_quadratic * np.abs(nu)
-                 + 3 * vehicle.damping_cubic * nu**2)
-    Minv = np.linalg.inv(mass_matrix(vehicle))
-    psi = float(eta0[3])
-    c, s = np.cos(psi), np.sin(psi)
-    A = np.zeros((8, 8))
-    A[0, 3] = -s * u - c * v
-    A[1, 3] = c * u - s * v
-    A[:4, 4:] = J(psi)
-    A[4:, 4:] = Minv @ (dD - dC)
-    B = np.vstack([np.zeros((4, 4)), Minv])
+    x = np.concatenate([np.asarray(eta0, dtype=float).ravel(), np.asarray(nu0, dtype=float).ravel()])
+    A = np.empty((8, 8))
+    jacobian_into(_packed(vehicle), x, A)
+    B = np.vstack([np.zeros((4, 4)), np.linalg.inv(mass_matrix(vehicle))])
     return A, B
 
 

@@ -1,4 +1,4 @@
-"""Linear depth-and-heading models for the observer and the controller (SPEC sections 5-6).
+"""Linear depth-and-heading models for the observer and the controller (Sandøy 2016, secs. 5.1-5.2).
 
 Decoupled heave and yaw around low speed:
 
@@ -59,7 +59,7 @@ def observer_model(p: HeaveYawParams, T_w: float, T_r: float) -> tuple[np.ndarra
     """A (6x6), B (6x2), E (6x6) of the observer model with Gauss-Markov bias states.
 
     E maps the noise vector [w_z, w_psi, w_w, w_r, w_bw, w_br]: process noise on the
-    velocities enters through M^-1, bias noise directly (SPEC section 5).
+    velocities enters through M^-1, bias noise directly (Sandøy 2016, sec. 5.1).
     """
     if not (T_w > 0 and T_r > 0):
         raise ValueError(f"bias time constants must be positive, got T_w={T_w}, T_r={T_r}")

@@ -1,4 +1,4 @@
-"""Noise processes: first-order Gauss-Markov biases and correlated Gaussian samples (SPEC section 4).
+"""Noise processes: first-order Gauss-Markov biases and correlated Gaussian samples (Sandøy 2016, ch. 3).
 
 A Gauss-Markov process with stationary variance sigma^2 and correlation time 1/beta,
 

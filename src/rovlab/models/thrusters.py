@@ -1,4 +1,4 @@
-"""Thruster models: PWM command <-> thrust (SPEC section 3).
+"""Thruster models: PWM command <-> thrust (Sandøy 2016, ch. 2).
 
 Two models, chosen per thruster in the vehicle file:
 

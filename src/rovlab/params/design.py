@@ -1,20 +1,22 @@
 """Filter and controller configuration: a frozen, validated, closed-schema TOML file.
 
 A configuration holds everything the depth-and-heading observer and the LQR need beyond the
-vehicle file (SPEC sections 5-6): the sample time, optional overrides of the model parameters,
+vehicle file (Sandøy 2016, secs. 5.1-5.2): the sample time, optional overrides of the model parameters,
 the white-noise power spectral densities W and the bias time constants, the measurement set
 (which sensor channels are fused, their variances and the sensor-management settings), the
 initial belief and the LQR weights. Packaged configurations live in ``params/configs``:
 
 * ``default``: the vehicle file's own model parameters and sensor variances; motion capture z
   and psi plus pressure depth; a wide initial covariance so the filter locks on from any start.
-* ``thesis``: the design values of Sandøy 2016 (appendix scripts A.3-A.4, SPEC sections 5-6).
+* ``thesis``: the design values of Sandøy 2016 (secs. 5.1-5.2, appendix scripts A.3-A.4).
 
 File format (every table is closed: unknown keys are errors; ``source`` is required)::
 
     name = "thesis"
     source = "where the numbers came from"
     sample_time = 0.1                      # h [s], filter and controller step
+    estimator = "kf"                       # optional: the estimator component (default "kf")
+    controller = "lqg"                     # optional: the controller component (default "lqg")
 
     [model]                                # optional; absent keys come from the vehicle file
     source = "..."
@@ -72,8 +74,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from rovlab.core.weights import bryson_diagonal
 from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
-from rovlab.params.vehicle import SENSOR_CHANNELS, Sensor, Vehicle
+from rovlab.params.vehicle import PLAUSIBLE, SENSOR_CHANNELS, Sensor, Vehicle
 
 OBSERVER_STATES = ("z", "psi", "w", "r", "b_w", "b_r")
 CONTROL_STATES = ("z", "psi", "w", "r")
@@ -86,6 +89,18 @@ _DEG = math.pi / 180.0
 _STATE_KEYS = {"z": (0, 1.0), "psi_deg": (1, _DEG), "w": (2, 1.0), "r_deg_s": (3, _DEG),
                "b_w": (4, 1.0), "b_r": (5, 1.0)}
 _LQR_STATE_KEYS = {"z": (0, 1.0), "psi_deg": (1, _DEG), "w": (2, 1.0), "r_deg_s": (3, _DEG)}
+# Plausibility outside the vehicle file's ranges (issue 15: a sample time of 1e-7 s meant 1e6
+# predictions per logged row; a bias time of 5e-324 s per kg a ValueError deep in the design).
+SAMPLE_TIME_RANGE = (1e-3, 10.0)  # h [s]: 1 kHz .. 0.1 Hz
+BIAS_TIME_PER_MASS_RANGE = (1e-3, 1e5)  # [s/kg]: the thesis uses 100
+BIAS_TIME_RANGE = (0.1, 1e8)  # T_w, T_r [s]
+PSD_RANGE = (0.0, 1e6)  # white-noise spectral densities, SI
+# initial state (and its standard deviation) per file key, in the file's units
+_STATE_RANGES = {"z": (-1e4, 1e4), "psi_deg": (-720.0, 720.0), "w": (-10.0, 10.0), "r_deg_s": (-720.0, 720.0),
+                 "b_w": (-1e4, 1e4), "b_r": (-1e3, 1e3)}
+_MODEL_RANGES = {"mass": PLAUSIBLE["mass"], "I_zz": PLAUSIBLE["I_zz"], "Z_wdot": PLAUSIBLE["added_mass"],
+                 "N_rdot": PLAUSIBLE["added_mass"], "Z_w": PLAUSIBLE["damping_linear"],
+                 "N_r": PLAUSIBLE["damping_linear"]}
 
 
 @dataclass(frozen=True)
@@ -151,6 +166,8 @@ class DesignConfig:
     reference_gain: str  # "discrete" | "continuous"
     sources: Mapping[str, str] = field(default_factory=dict)
     file: str = ""
+    estimator: str = "kf"  # the estimator component (rovlab.sim.components.ESTIMATORS)
+    controller: str = "lqg"  # the controller component (rovlab.sim.components.CONTROLLERS)
 
     @property
     def W(self) -> np.ndarray:
@@ -210,10 +227,13 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     col = Collector(file)
     top = TableReader(dict(data), col)
     sources: dict[str, str] = {}
-    name = top.string("name")
+    name = top.name("name")
     description = top.string("description", "")
     sources["config"] = top.string("source")
-    h = top.number("sample_time", positive=True, what="filter and controller step in s")
+    h = top.number("sample_time", positive=True, plausible=SAMPLE_TIME_RANGE,
+                   what="filter and controller step in s")
+    estimator = top.string("estimator", "kf")  # checked against the registry when the loop is built
+    controller = top.string("controller", "lqg")
 
     overrides: dict[str, float] = {}
     if top.has("model"):
@@ -222,9 +242,10 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         for key in MODEL_KEYS:
             if mt.has(key):
                 if key in ("mass", "I_zz"):
-                    overrides[key] = mt.number(key, positive=True)
+                    overrides[key] = mt.number(key, positive=True, plausible=_MODEL_RANGES[key])
                 else:
-                    overrides[key] = mt.number(key, nonpositive=True, what="SNAME sign: <= 0")
+                    overrides[key] = mt.number(key, nonpositive=True, plausible=_MODEL_RANGES[key],
+                                               what="SNAME sign: <= 0")
         mt.finish()
 
     pn = top.table("process_noise")
@@ -232,7 +253,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     psd = np.zeros(6)
     pt = pn.table("psd")
     for i, key in enumerate(PSD_KEYS):
-        psd[2 + i] = pt.number(key, nonnegative=True, what="power spectral density, SI")
+        psd[2 + i] = pt.number(key, nonnegative=True, plausible=PSD_RANGE, what="power spectral density, SI")
     pt.finish()
     per_mass: float | None = None
     constants: tuple[float, float] | None = None
@@ -242,10 +263,12 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         pn.raw("bias_time_per_mass", None)
         pn.raw("bias_time_constant", None)
     elif pn.has("bias_time_per_mass"):
-        per_mass = pn.number("bias_time_per_mass", positive=True, what="T = factor * M")
+        per_mass = pn.number("bias_time_per_mass", positive=True, plausible=BIAS_TIME_PER_MASS_RANGE,
+                             what="T = factor * M, s/kg")
     else:
         bt = pn.table("bias_time_constant")
-        constants = (bt.number("w", positive=True, what="s"), bt.number("r", positive=True, what="s"))
+        constants = (bt.number("w", positive=True, plausible=BIAS_TIME_RANGE, what="s"),
+                     bt.number("r", positive=True, plausible=BIAS_TIME_RANGE, what="s"))
         bt.finish()
     pn.finish()
 
@@ -254,7 +277,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     x0 = _state_table(it, "state", _STATE_KEYS, nonnegative=False)
     std = _state_table(it, "std", _STATE_KEYS, nonnegative=True)
     with np.errstate(over="ignore"):
-        huge = [k for k, (i, _) in _STATE_KEYS.items() if not np.isfinite(std[i] ** 2)]
+        huge = [k for k, (i, _) in _STATE_KEYS.items() if np.isfinite(std[i]) and not np.isfinite(std[i] ** 2)]
     for key in huge:  # P0 = diag(std^2) must be finite
         i, factor = _STATE_KEYS[key]
         it.problem(f"std.{key}", float(std[i] / factor), "a standard deviation whose square is finite")
@@ -276,6 +299,12 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     lt = top.table("lqr")
     sources["lqr"] = lt.string("source")
     Q, R, bryson = _lqr_weights(lt)
+    with np.errstate(all="ignore"):
+        if np.all(~np.isnan(Q)) and np.all(~np.isnan(R)) and not (
+                np.all(np.isfinite(Q)) and np.all(np.isfinite(R)) and np.all(R > 0)):
+            lt.problem("state_max" if bryson else "Q_diag", {"Q": Q.tolist(), "R": R.tolist()},
+                       "weights that are finite (and positive for the inputs): a maximum so small "
+                       "that 1/max^2 overflows is not a limit")
     reference = lt.string("reference_gain", "discrete", choices=("discrete", "continuous"))
     lt.finish()
     top.finish()
@@ -287,7 +316,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         name=name, description=description, sample_time=h, model_overrides=overrides, psd=psd,
         bias_time_per_mass=per_mass, bias_time_constant=constants, measurements=tuple(measurements),
         initial_state=x0, initial_std=std, lqr_Q=Q, lqr_R=R, lqr_bryson=bryson,
-        reference_gain=reference, sources=sources, file=file,
+        reference_gain=reference, sources=sources, file=file, estimator=estimator, controller=controller,
     )
 
 
@@ -297,7 +326,8 @@ def _state_table(t: TableReader, name: str, keys: Mapping[str, tuple[int, float]
     sub = t.table(name, required=False)
     for key, (i, factor) in keys.items():
         if sub.has(key):
-            out[i] = sub.number(key, nonnegative=nonnegative) * factor
+            lo, hi = _STATE_RANGES[key]
+            out[i] = sub.number(key, nonnegative=nonnegative, plausible=(0.0 if nonnegative else lo, hi)) * factor
     sub.finish()
     return out
 
@@ -378,10 +408,11 @@ def _lqr_weights(t: TableReader) -> tuple[np.ndarray, np.ndarray, dict[str, np.n
         if sub.has(key):
             uw[i] = sub.number(key, positive=True)
     sub.finish()
-    # Bryson's rule (Bryson & Ho 1975): weight_i / max_i^2. Kept as plain arithmetic here so the
-    # params layer does not import rovlab.control; rovlab.control.lqr.bryson is the same rule.
-    Q = sw / smax**2
-    R = uw / umax**2
+    # Bryson's rule (Bryson & Ho 1975): weight_i / max_i^2 (NaN where the file's value was refused;
+    # an overflow is reported by the caller)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        Q = bryson_diagonal(np.where(np.isfinite(smax) & (smax > 0), smax, np.nan), sw)
+        R = bryson_diagonal(np.where(np.isfinite(umax) & (umax > 0), umax, np.nan), uw)
     return Q, R, {"state_max": smax, "input_max": umax, "state_weight": sw, "input_weight": uw}
 
 

@@ -21,9 +21,7 @@ written atomically (temporary file + rename), so a failed edit never leaves a br
 from __future__ import annotations
 
 import math
-import os
 import re
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
@@ -32,6 +30,7 @@ import tomlkit
 from tomlkit import items
 from tomlkit.container import Container
 
+from rovlab.core.files import atomic_write_text
 from rovlab.params.validate import ConfigError, Problem
 
 
@@ -334,31 +333,3 @@ def edit_vehicle_file(path: str | Path, values: Mapping[str, Any], *, sources: M
 
     return edit_toml_file(path, values, sources=sources, source_mode=source_mode, output=output,
                           validate=validate)
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write a text file via a temporary file in the same folder and ``os.replace``.
-
-    An existing file keeps its permission bits; readers never see a half-written file.
-    """
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    mode = path.stat().st_mode & 0o777 if path.exists() else None
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        if mode is None:
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o666 & ~umask
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise

@@ -114,6 +114,25 @@ class Collector:
             raise ConfigError(self.problems, what)
 
 
+def control_characters(text: str, *, allow_newlines: bool) -> str:
+    """The control characters in ``text`` as escapes (e.g. ``'\\x00, \\n'``), '' if none.
+
+    NUL and other C0/C1 controls are never meaningful in rovlab's text; newlines and tabs are
+    allowed in free text (descriptions, sources) when ``allow_newlines``.
+    """
+    ok = "\n\r\t" if allow_newlines else ""
+    found = sorted({c for c in text if (ord(c) < 32 or 127 <= ord(c) < 160 or c in "\u2028\u2029")
+                    and c not in ok})
+    return ", ".join(repr(c)[1:-1] for c in found)
+
+
+def plausible_expectation(bounds: tuple[float, float], what: str = "") -> str:
+    lo, hi = bounds
+    unit = f"{what}; " if what else ""
+    return (f"a number within {lo:g} .. {hi:g} ({unit}the plausible range for a BlueROV-class "
+            "vehicle, docs/vehicle-file.md)")
+
+
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
@@ -160,9 +179,14 @@ class TableReader:
         negative: bool = False,
         lo: float | None = None,
         hi: float | None = None,
+        plausible: tuple[float, float] | None = None,
         what: str = "",
     ) -> float:
-        """A finite real number with optional sign/range constraints (NaN on error)."""
+        """A finite real number with optional sign/range constraints (NaN on error).
+
+        ``plausible = (lo, hi)`` is a physical plausibility range (both ends included): a value
+        outside it is refused with the range in the message (e.g. a damping of -9e18).
+        """
         required = default is _MISSING
         value = self._get(name, required)
         if value is _MISSING:
@@ -186,6 +210,9 @@ class TableReader:
             if failed:
                 self.problem(name, value, expectation + (f" ({what})" if what else ""))
                 return math.nan
+        if plausible is not None and not plausible[0] <= x <= plausible[1]:
+            self.problem(name, value, plausible_expectation(plausible, what))
+            return math.nan
         return x
 
     def integer(self, name: str, default: int | Any = _MISSING, *, lo: int | None = None) -> int:
@@ -211,11 +238,33 @@ class TableReader:
         if not isinstance(value, str):
             self.problem(name, value, "a string")
             return ""
+        bad = control_characters(value, allow_newlines=True)
+        if bad:
+            self.problem(name, value, f"text without control characters (found {bad})")
+            return ""
         if choices is not None:
             options = list(choices)
             if value not in options:
                 self.problem(name, value, "one of " + ", ".join(repr(c) for c in options))
                 return ""
+        return value
+
+    def name(self, name: str = "name", default: str | Any = _MISSING) -> str:
+        """A name: one line of printable text, 1-64 characters, no leading/trailing space.
+
+        Names end up in file names, CSV headers and log lines, so a NUL, a newline or a tab in
+        one is refused rather than carried into those files.
+        """
+        before = len(self.collector.problems)
+        value = self.string(name, default)
+        if len(self.collector.problems) > before or name not in self.data:
+            return value  # already reported (wrong type, NUL, ...) or the default
+        bad = control_characters(value, allow_newlines=False)
+        if bad or not value or len(value) > 64 or value != value.strip():
+            why = f" (found {bad})" if bad else ""
+            self.problem(name, value, "a name: 1-64 printable characters on one line, no leading or "
+                         f"trailing space{why}")
+            return ""
         return value
 
     def boolean(self, name: str, default: bool | Any = _MISSING) -> bool:
@@ -250,13 +299,13 @@ class TableReader:
         return np.asarray(value, dtype=float)
 
     def numbers_table(self, name: str, keys: Sequence[str], *, required: Sequence[str] = (),
-                      positive: bool = False) -> dict[str, float]:
+                      positive: bool = False, plausible: tuple[float, float] | None = None) -> dict[str, float]:
         """An inline table mapping some of ``keys`` to numbers, e.g. ``{ z = 1e-4 }``."""
         sub = self.table(name, required=False)
         out: dict[str, float] = {}
         for k in keys:
             if sub.has(k) or k in required:
-                out[k] = sub.number(k, positive=positive)
+                out[k] = sub.number(k, positive=positive, plausible=plausible)
         sub.finish()
         return out
 

@@ -14,7 +14,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
+from rovlab.params.validate import (Collector, ConfigError, PackagedFiles, Problem, TableReader,
+                                    plausible_expectation, read_toml)
 
 DOF4 = ("surge", "sway", "heave", "yaw")
 WRENCH6 = ("X", "Y", "Z", "K", "M", "N")
@@ -27,6 +28,31 @@ SENSOR_CHANNELS: dict[str, tuple[str, ...]] = {
 }
 THRUST_TABLES = ("t200",)
 
+# Physical plausibility: the ranges a BlueROV-class vehicle (a small ROV of 0.1 kg to 1 t, in
+# water, on Earth) can have. A value outside is refused by the loader before anything runs (a
+# fuzzer's damping of -9e18 or gravity of 1.8e19 made the plant NaN from t = 0.1 s). The table is
+# restated in docs/vehicle-file.md; widen a bound here and there together if a real vehicle needs it.
+PLAUSIBLE: dict[str, tuple[float, float]] = {
+    "mass": (0.1, 1000.0),  # [kg]
+    "I_zz": (1e-4, 1000.0),  # [kg m^2]
+    "offset": (-1.0, 1.0),  # r_g, r_b components [m]
+    "displaced_volume": (1e-4, 1.0),  # [m^3]
+    "water_density": (950.0, 1100.0),  # [kg/m^3]: fresh water ~998, sea water ~1025 (DNV-RP-H103)
+    "gravity": (9.7, 9.9),  # [m/s^2]: 9.78 at the equator to 9.83 at the poles
+    "buoyancy_ratio": (0.5, 2.0),  # B / W: a ROV is trimmed near neutral buoyancy
+    "added_mass": (-1000.0, 0.0),  # X_udot, Y_vdot, Z_wdot [kg], N_rdot [kg m^2]
+    "damping_linear": (-1e4, 0.0),  # [N s/m], [N m s/rad]
+    "damping_quadratic": (-1e4, 0.0),  # [N s^2/m^2], [N m s^2/rad^2]
+    "damping_cubic": (-1e5, 0.0),  # [N s^3/m^3], [N m s^3/rad^3]
+    "size": (0.01, 10.0),  # geometry lengths [m]
+    "area": (1e-4, 100.0),  # projected areas [m^2]
+    "position": (-5.0, 5.0),  # thruster and sensor position components [m]
+    "K_L": (0.0, 10.0),  # [N/us]
+    "K_NL": (0.0, 1.0),  # [N/us^2]
+    "rate_hz": (0.01, 1e4),  # sensor sample rate [Hz]
+    "variance": (1e-15, 1e4),  # sensor variance per channel [SI units squared]
+}
+
 
 def _frozen(a: Any) -> np.ndarray:
     arr = np.array(a, dtype=float)
@@ -36,7 +62,7 @@ def _frozen(a: Any) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class QuadraticCurve:
-    """Dead-band thrust curve f = K_L s + K_NL s|s| with s = u -/+ d (SPEC section 3).
+    """Dead-band thrust curve f = K_L s + K_NL s|s| with s = u -/+ d (Sandøy 2016, ch. 2).
 
     Coefficients are per microsecond of PWM offset: K_L in N/us, K_NL in N/us^2; all >= 0.
     """
@@ -185,38 +211,48 @@ def vehicle_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") -> Vehic
     top = TableReader(dict(data), col)
     sources: dict[str, str] = {}
 
-    name = top.string("name")
+    name = top.name("name")
     description = top.string("description", "")
     sources["vehicle"] = top.string("source")
 
     rb = top.table("rigid_body")
     sources["rigid_body"] = rb.string("source")
-    mass = rb.number("mass", positive=True, what="kg")
-    I_zz = rb.number("I_zz", positive=True, what="yaw moment of inertia about VO in kg m^2")
-    r_g = rb.vector("r_g", 3, default=[0.0, 0.0, 0.0], what="CG from VO in m")
+    mass = rb.number("mass", positive=True, plausible=PLAUSIBLE["mass"], what="kg")
+    I_zz = rb.number("I_zz", positive=True, plausible=PLAUSIBLE["I_zz"],
+                     what="yaw moment of inertia about VO in kg m^2")
+    r_g = _offset(rb, "r_g", "CG from VO in m")
     rb.finish()
 
     rs = top.table("restoring")
     sources["restoring"] = rs.string("source")
-    volume = rs.number("displaced_volume", positive=True, what="m^3")
-    rho = rs.number("water_density", 1000.0, positive=True, what="kg/m^3")
-    grav = rs.number("gravity", 9.81, positive=True, what="m/s^2")
-    r_b = rs.vector("r_b", 3, default=[0.0, 0.0, 0.0], what="CB from VO in m")
+    volume = rs.number("displaced_volume", positive=True, plausible=PLAUSIBLE["displaced_volume"], what="m^3")
+    rho = rs.number("water_density", 1000.0, positive=True, plausible=PLAUSIBLE["water_density"],
+                    what="kg/m^3")
+    grav = rs.number("gravity", 9.81, positive=True, plausible=PLAUSIBLE["gravity"], what="m/s^2")
+    r_b = _offset(rs, "r_b", "CB from VO in m")
+    if all(np.isfinite([mass, volume, rho, grav])):
+        ratio = rho * volume / mass
+        lo, hi = PLAUSIBLE["buoyancy_ratio"]
+        if not lo <= ratio <= hi:
+            rs.problem("displaced_volume", volume,
+                       f"a buoyancy B = rho g Delta within {lo:g} .. {hi:g} times the weight m g "
+                       f"(B/W is {ratio:.3g} with mass {mass:g} kg; a ROV is trimmed near neutral; docs/vehicle-file.md)")
     rs.finish()
 
     geometry = None
     if top.has("geometry"):
         gt = top.table("geometry")
-        vals = {k: gt.number(k, positive=True) for k in
-                ("length", "width", "height", "area_front", "area_side", "area_top")}
+        vals = {k: gt.number(k, positive=True, plausible=PLAUSIBLE["area" if k.startswith("area") else "size"],
+                             what="m^2" if k.startswith("area") else "m")
+                for k in ("length", "width", "height", "area_front", "area_side", "area_top")}
         geometry = Geometry(**vals, source=gt.string("source"))
         sources["geometry"] = geometry.source
         gt.finish()
 
     am = top.table("added_mass")
     sources["added_mass"] = am.string("source")
-    added = np.array([am.number(k, nonpositive=True, what="SNAME sign: added mass is <= 0")
-                      for k in ADDED_MASS_KEYS])
+    added = np.array([am.number(k, nonpositive=True, plausible=PLAUSIBLE["added_mass"],
+                                what="SNAME sign: added mass is <= 0") for k in ADDED_MASS_KEYS])
     am.finish()
 
     dm = top.table("damping")
@@ -224,9 +260,10 @@ def vehicle_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") -> Vehic
     lin, quad, cub = np.zeros(4), np.zeros(4), np.zeros(4)
     for i, dof in enumerate(DOF4):
         d = dm.table(dof)
-        lin[i] = d.number("linear", nonpositive=True, what="SNAME sign: damping is <= 0")
-        quad[i] = d.number("quadratic", 0.0, nonpositive=True, what="SNAME sign: damping is <= 0")
-        cub[i] = d.number("cubic", 0.0, nonpositive=True, what="SNAME sign: damping is <= 0")
+        for arr, order, default in ((lin, "linear", _MISSING_DEFAULT), (quad, "quadratic", 0.0),
+                                    (cub, "cubic", 0.0)):
+            arr[i] = d.number(order, *(() if default is _MISSING_DEFAULT else (default,)), nonpositive=True,
+                              plausible=PLAUSIBLE[f"damping_{order}"], what="SNAME sign: damping is <= 0")
         d.finish()
     dm.finish()
 
@@ -235,7 +272,7 @@ def vehicle_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") -> Vehic
     for dup in sorted({n for n in names if names.count(n) > 1}):
         top.problem("thrusters", dup, "unique thruster names")
 
-    sensors = tuple(_read_sensor(s) for s in top.tables("sensors", required=False))
+    sensors = tuple(_read_sensor(s) for s in top.tables("sensors", min_count=1))
     snames = [s.name for s in sensors]
     for dup in sorted({n for n in snames if snames.count(n) > 1}):
         top.problem("sensors", dup, "unique sensor names")
@@ -254,20 +291,39 @@ def vehicle_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") -> Vehic
     )
 
 
+_MISSING_DEFAULT = object()
+
+
+def _offset(t: TableReader, key: str, what: str) -> np.ndarray:
+    """An optional 3-vector (default 0) whose components lie in PLAUSIBLE["offset"]."""
+    return _bounded_vector(t, key, PLAUSIBLE["offset"], what, default=[0.0, 0.0, 0.0])
+
+
+def _bounded_vector(t: TableReader, key: str, bounds: tuple[float, float], what: str, **kw: Any) -> np.ndarray:
+    vec = t.vector(key, 3, what=what, **kw)
+    if np.all(np.isfinite(vec)) and not np.all((vec >= bounds[0]) & (vec <= bounds[1])):
+        t.problem(key, vec.tolist(), "components " + plausible_expectation(bounds, what)[2:])
+        return np.full(3, np.nan)
+    return vec
+
+
 def _read_thruster(t: TableReader) -> Thruster:
-    name = t.string("name")
-    position = t.vector("position", 3, what="m from VO, body frame")
+    name = t.name("name")
+    position = _bounded_vector(t, "position", PLAUSIBLE["position"], "m from VO, body frame")
     direction = t.vector("direction", 3, what="unit thrust direction")
-    if np.all(np.isfinite(direction)) and abs(float(np.linalg.norm(direction)) - 1.0) > 1e-6:
-        t.problem("direction", direction.tolist(),
-                  f"a unit vector (its norm is {np.linalg.norm(direction):.6g})")
+    with np.errstate(over="ignore"):
+        norm = float(np.sqrt(np.sum(np.square(direction)))) if np.all(np.isfinite(direction)) else 1.0
+    if not abs(norm - 1.0) <= 1e-6:
+        t.problem("direction", direction.tolist(), f"a unit vector (its norm is {norm:.6g})")
+        direction = np.full(3, np.nan)
     model = t.string("model", "quadratic", choices=("quadratic", "table"))
     curve = None
     table = None
     voltage = None
     if model == "quadratic":
         q = t.table("quadratic")
-        curve = QuadraticCurve(*(q.number(k, nonnegative=True, what="N/us or N/us^2")
+        curve = QuadraticCurve(*(q.number(k, nonnegative=True, plausible=PLAUSIBLE[k[:-4]],
+                                          what="N/us" if k.startswith("K_L_") else "N/us^2")
                                  for k in ("K_L_pos", "K_NL_pos", "K_L_neg", "K_NL_neg")))
         q.finish()
         if all(np.isfinite([curve.K_L_pos, curve.K_NL_pos])) and curve.K_L_pos + curve.K_NL_pos == 0:
@@ -299,12 +355,13 @@ def _read_thruster(t: TableReader) -> Thruster:
 
 
 def _read_sensor(s: TableReader) -> Sensor:
-    name = s.string("name")
+    name = s.name("name")
     kind = s.string("kind", choices=tuple(SENSOR_CHANNELS))
-    position = s.vector("position", 3, default=[0.0, 0.0, 0.0], what="lever arm in m, body frame")
-    rate = s.number("rate_hz", positive=True)
+    position = _bounded_vector(s, "position", PLAUSIBLE["position"], "lever arm in m, body frame",
+                               default=[0.0, 0.0, 0.0])
+    rate = s.number("rate_hz", positive=True, plausible=PLAUSIBLE["rate_hz"], what="Hz")
     channels = SENSOR_CHANNELS.get(kind, ())
-    variance = s.numbers_table("variance", channels, positive=True)
+    variance = s.numbers_table("variance", channels, positive=True, plausible=PLAUSIBLE["variance"])
     if kind in SENSOR_CHANNELS and not variance:
         s.problem("variance", {}, "a variance for at least one of " + ", ".join(channels))
     source = s.string("source", "")

@@ -15,45 +15,64 @@ management state while the channel set is unchanged).
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
+from rovlab.core.components import restore, state_of
 from rovlab.estimation.fusion import CH_MODE, MODE_AUTO, MODE_OFF, MODE_ON, new_channel_state
 from rovlab.io.messages import row_messages
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
-from rovlab.sim.runner import Prepared, closed_loop, prepare
+from rovlab.sim.loop import Drive, draw
+from rovlab.sim.runner import DesignBook, Prepared, Simulation, columns, prepare, schedule
 from rovlab.sim.scenario import Scenario, load_scenario
 
 _MODES = {"auto": MODE_AUTO, "off": MODE_OFF, "on": MODE_ON}
-_STATE_KEYS = ("xp", "bias", "xo", "xf", "Pf", "chs")
 
 
 class LiveSimulation:
-    """A scenario advanced on demand. Not thread-safe: drive it from one thread (or task)."""
+    """A scenario advanced on demand. Not thread-safe: drive it from one thread (or task).
+
+    The live run uses the batch run's components, loop and columns; N steps advanced in one
+    chunk give exactly the batch run of the same seed (in several chunks the noise is drawn
+    chunk by chunk, so the sample paths differ while the statistics do not).
+    """
 
     def __init__(self, scenario: str | Scenario, *, seed: int | None = None, vehicle: Vehicle | None = None,
                  truth: Vehicle | None = None, config: DesignConfig | None = None) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, seed=seed)
         self._seed = self.scenario.seed if seed is None else seed
-        self._overrides = {"vehicle": vehicle, "truth": truth, "config": config}
+        self._overrides: dict[str, Any] = {"vehicle": vehicle, "truth": truth, "config": config}
+        self._book = DesignBook()
         self.reset()
 
     # -- lifecycle ---------------------------------------------------------------------------
     def reset(self) -> None:
         """Back to the scenario's initial state (parameters changed so far are kept)."""
-        self.prep = _prepare(self.scenario, **self._overrides)
-        self.state = {k: np.array(self.prep.arrays[k], copy=True) for k in _STATE_KEYS}
-        self.k = 0
+        self.prep = _prepare(self.scenario, self._book, **self._overrides)
+        self.sim = Simulation(self.prep)
         self.rng = np.random.default_rng(self._seed)
+        self.rng.standard_normal(4)  # the initial bias draw, as in rovlab.sim.runner.prepare
         self.reference = self.scenario.reference_at(0.0)
         self.reference_follows_scenario = True
-        self.sensor_available = {c.sensor: True for c in self.prep.filter_model.channels}
+        self.sensor_available = {c.sensor: True for c in self.prep.channels}
+
+    @property
+    def k(self) -> int:
+        """Index of the next control step."""
+        return self.sim.k
+
+    @property
+    def state(self) -> dict[str, np.ndarray]:
+        """The live state arrays by name (the estimator's channel states as ``chs``)."""
+        est = self.sim.estimator
+        return {"x": est.x, "P": est.P, "chs": est.ch}
 
     @property
     def h(self) -> float:
-        return float(self.prep.arrays["h"])
+        return float(self.prep.h)
 
     @property
     def time(self) -> float:
@@ -62,7 +81,7 @@ class LiveSimulation:
 
     @property
     def channels(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.prep.filter_model.channels)
+        return tuple(c.name for c in self.prep.channels)
 
     @property
     def vehicle(self) -> Vehicle:
@@ -98,83 +117,60 @@ class LiveSimulation:
             raise ValueError(f"mode must be one of {', '.join(_MODES)}, got {mode!r}")
         if channel not in self.channels:
             raise ValueError(f"unknown channel {channel!r}; the filter has {', '.join(self.channels)}")
-        self.state["chs"][self.channels.index(channel), CH_MODE] = _MODES[mode]
+        self.sim.estimator.ch[self.channels.index(channel), CH_MODE] = _MODES[mode]
 
     def apply(self, *, vehicle: Vehicle | None = None, truth: Vehicle | None = None,
               config: DesignConfig | None = None) -> None:
         """Swap in a new model vehicle, plant truth and/or configuration, keeping the state.
 
-        Raises ConfigError (and changes nothing) if the design fails, e.g. an unobservable sensor set.
+        Every component's state (plant, estimator, controller) carries over where its shape
+        still fits; the channel states follow the channels by name. Raises ConfigError (and
+        changes nothing) if the design fails, e.g. an unobservable sensor set.
         """
         overrides = dict(self._overrides)
         for key, value in (("vehicle", vehicle), ("truth", truth), ("config", config)):
             if value is not None:
                 overrides[key] = value
-        new = _prepare(self.scenario, **overrides)  # raises before anything changes
-        old_channels = self.channels
-        self.prep = new
-        self._overrides = overrides
-        if self.channels != old_channels:
-            modes = {name: self.state["chs"][j, CH_MODE] for j, name in enumerate(old_channels)}
-            chs = new_channel_state(len(self.channels))
-            for j, name in enumerate(self.channels):
+        new = _prepare(self.scenario, self._book, **overrides)  # raises before anything changes
+        old_sim, old_channels = self.sim, self.channels
+        sim = Simulation(new)
+        sim.k = old_sim.k
+        for slot, comp in old_sim.components().items():
+            saved = state_of(comp)
+            if slot == "estimator":
+                saved.pop("ch")
+            restore(sim.components()[slot], saved)
+        new_channels = tuple(c.name for c in new.channels)
+        old_ch = old_sim.estimator.ch
+        if new_channels == old_channels:
+            sim.estimator.ch[...] = old_ch
+        else:
+            modes = {name: old_ch[j, CH_MODE] for j, name in enumerate(old_channels)}
+            chs = new_channel_state(len(new_channels))
+            for j, name in enumerate(new_channels):
                 chs[j, CH_MODE] = modes.get(name, MODE_AUTO)
-            self.state["chs"] = chs
-            self.sensor_available = {c.sensor: self.sensor_available.get(c.sensor, True)
-                                     for c in new.filter_model.channels}
-        # the truth's parameters changed: its packed vector is in the new arrays already
+            sim.estimator.ch[...] = chs
+        self.prep, self.sim, self._overrides = new, sim, overrides
+        self.sensor_available = {c.sensor: self.sensor_available.get(c.sensor, True) for c in new.channels}
 
     # -- running -----------------------------------------------------------------------------
     def advance(self, n: int = 1) -> list[tuple[str, float, dict[str, Any]]]:
         """Run n control steps; returns their messages (topic, time, message) in order."""
         if n < 1:
             return []
-        a = self.prep.arrays
-        m = len(self.channels)
-        nt = a["rows"].shape[0]
-        n_sub = a["n_sub"]
+        prep = self.prep
         k0 = self.k
-        refs = np.empty((n, 2))
-        for i in range(n):
-            refs[i] = self.scenario.reference_at((k0 + i) * self.h) if self.reference_follows_scenario \
-                else self.reference
-        if self.reference_follows_scenario:
-            self.reference = tuple(refs[-1])
-        dropout = np.zeros((n, m), dtype=np.bool_)
-        for j, c in enumerate(self.prep.filter_model.channels):
-            if not self.sensor_available.get(c.sensor, True):
-                dropout[:, j] = True
         times = (k0 + np.arange(n)) * self.h
-        for d in self.scenario.dropouts:
-            w = (times >= d.start_s) & (times < d.end_s)
-            for j, c in enumerate(self.prep.filter_model.channels):
-                if c.sensor == d.sensor and d.channel in (None, c.quantity):
-                    dropout[w, j] = True
-        observer = a["plant_kind"] == 1
-        f32 = np.float32  # plant noise draws in single precision, as in rovlab.sim.runner.prepare
-        plant_normals = np.zeros((0, 4), f32) if observer else self.rng.standard_normal((n * n_sub, 4), dtype=f32)
-        obs_normals = self.rng.standard_normal((n * n_sub, 6), dtype=f32) if observer else np.zeros((0, 6), f32)
-        bias_normals = self.rng.standard_normal((n, 4))
-        sensor_normals = self.rng.standard_normal((n, m))
-        logs = dict(
-            log_true=np.empty((n, 4)), log_y=np.empty((n, m)), log_x=np.empty((n, 6)), log_P=np.empty((n, 6, 6)),
-            log_u=np.empty((n, 4)), log_pwm=np.empty((n, nt)), log_status=np.empty((n, m)),
-            log_cons=np.empty((n, 3)), log_bias=np.zeros((n, 4)),
-        )
-        st = self.state
-        closed_loop(
-            k0, k0 + n, a["h"], n_sub, a["h_plant"], a["plant_kind"],
-            a["p_truth"], st["xp"], a["noise_std"], plant_normals, st["bias"], a["bias_phi"], a["bias_std"],
-            bias_normals, a["Phi_p"], a["Delta_p"], a["L_p"], st["xo"], obs_normals,
-            a["ch_quantity"], a["ch_offset"], a["ch_std"], a["ch_period"], dropout, sensor_normals,
-            a["fmodel"], st["xf"], st["Pf"], st["chs"], a["K"], a["Pref"], refs,
-            a["B"], a["T"], a["s_alloc"], a["f_min"], a["f_max"], a["level"], a["n_levels"], a["rows"],
-            a["grid_pwm"], a["grid_force"], a["pwm_res"],
-            logs["log_true"], logs["log_y"], logs["log_x"], logs["log_P"], logs["log_u"], logs["log_pwm"],
-            logs["log_status"], logs["log_cons"], logs["log_bias"],
-        )
-        self.k = k0 + n
-        cols = _columns(self.prep, logs, times, refs)
+        unavailable = frozenset(s for s, ok in self.sensor_available.items() if not ok)
+        dropout, refs = schedule(self.scenario, prep.channels, times, unavailable)
+        if self.reference_follows_scenario:
+            self.reference = (float(refs[-1, 2]), float(refs[-1, 3]))
+        else:
+            refs[:, 2], refs[:, 3] = self.reference
+        n_sub = prep.plant.n_sub
+        normals = draw(self.rng, n, n_sub, type(prep.plant).DRAWS, len(prep.channels))
+        logs = self.sim.advance(Drive(*normals, dropout, refs))
+        cols = columns(prep, logs, times, refs)
         out = []
         for i in range(n):
             out.extend(row_messages(cols, i))
@@ -182,32 +178,7 @@ class LiveSimulation:
         return out
 
 
-def _columns(prep: Prepared, logs: Mapping[str, np.ndarray], times: np.ndarray, refs: np.ndarray) -> dict:
-    fm = prep.filter_model
-    cols: dict[str, np.ndarray] = {"time_s": times}
-    for i, s in enumerate(("z", "psi", "w", "r")):
-        cols[f"true_{s}"] = logs["log_true"][:, i]
-    if prep.scenario.plant == "observer":
-        cols["true_b_w"] = logs["log_bias"][:, 2]
-        cols["true_b_r"] = logs["log_bias"][:, 3]
-    for i, s in enumerate(fm.states):
-        cols[f"est_{s}"] = logs["log_x"][:, i]
-        cols[f"var_{s}"] = logs["log_P"][:, i, i]
-    for j, c in enumerate(fm.channels):
-        cols[f"meas_{c.column}"] = logs["log_y"][:, j]
-        cols[f"status_{c.column}"] = logs["log_status"][:, j]
-    cols["ref_z"] = refs[:, 0]
-    cols["ref_psi"] = refs[:, 1]
-    cols["tau_Z"] = logs["log_u"][:, 0]
-    cols["tau_N"] = logs["log_u"][:, 1]
-    for i, name in enumerate(prep.allocator.bank.names):
-        cols[f"pwm_{name}"] = logs["log_pwm"][:, i]
-    return cols
-
-
-def _prepare(sc: Scenario, *, vehicle: Vehicle | None, truth: Vehicle | None, config: DesignConfig | None) -> Prepared:
-    """prepare() for a live run: long horizon, optional vehicle/truth/config objects."""
-    from dataclasses import replace
-
-    live = replace(sc, duration_s=0.0)  # live runs have no fixed length; noise is drawn per chunk
-    return prepare(live, vehicle=vehicle, truth=truth, config=config)
+def _prepare(sc: Scenario, book: DesignBook, *, vehicle: Vehicle | None, truth: Vehicle | None,
+             config: DesignConfig | None) -> Prepared:
+    """prepare() for a live run: no fixed length; noise is drawn per chunk."""
+    return prepare(replace(sc, duration_s=0.0), vehicle=vehicle, truth=truth, config=config, book=book)

@@ -13,13 +13,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from rovlab.core.angles import wrap
 from rovlab.estimation import consistency as cons
-
-
-def wrap(a: np.ndarray | float) -> np.ndarray:
-    """Angle(s) wrapped to (-pi, pi]."""
-    a = np.asarray(a, dtype=float)
-    return np.pi - np.mod(np.pi - a, 2 * np.pi)
 
 
 def estimation_error(est: np.ndarray, truth: np.ndarray, angle_columns: Sequence[int] = (1,)) -> np.ndarray:

@@ -21,17 +21,20 @@ import numpy as np
 from rovlab.sim import metrics as mx
 
 
-def _one_run(data: Mapping[str, Any], file: str, seed: int) -> dict[str, Any]:
+def _one_run(data: Mapping[str, Any], file: str, seed: int, book: Any = None) -> dict[str, Any]:
     from rovlab.sim.runner import prepare, run_prepared, summarise
 
-    prepared = prepare(data, file=file, seed=seed)
+    prepared = prepare(data, file=file, seed=seed, book=book)
     result = run_prepared(prepared)
     m = summarise(result)
     return {"seed": seed, "metrics": m, "nees": result.nees, "nis": result.nis}
 
 
 def _chunk(data: Mapping[str, Any], file: str, seeds: Sequence[int]) -> list[dict[str, Any]]:
-    return [_one_run(data, file, s) for s in seeds]
+    from rovlab.sim.runner import DesignBook
+
+    book = DesignBook()  # the runs of a chunk share the loaded files and the design
+    return [_one_run(data, file, s, book) for s in seeds]
 
 
 def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, workers: int | None = None,
@@ -40,8 +43,11 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     """Run the scenario once per seed; results in seed order."""
     seeds = list(seeds)
     workers = max(1, workers or os.cpu_count() or 1)
+    from rovlab.sim.runner import DesignBook
+
+    book = DesignBook()
     if workers > 1 and backend == "processes":
-        _one_run(data, file, seeds[0])  # compile/load the loop here once; forked workers inherit it
+        _one_run(data, file, seeds[0], book)  # compile/load the loop here once; forked workers inherit it
     if backend == "dask":
         return _run_dask(data, file, seeds, scheduler, progress)
     if backend != "processes":
@@ -49,10 +55,13 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     n = len(seeds)
     if workers == 1 or n == 1:
         out = []
-        for i, s in enumerate(seeds):
-            out.append(_one_run(data, file, s))
-            if progress:
-                progress(i + 1, n)
+        try:
+            for i, s in enumerate(seeds):
+                out.append(_one_run(data, file, s, book))
+                if progress:
+                    progress(i + 1, n)
+        except KeyboardInterrupt:  # keep what finished, as the parallel path does
+            print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
         return out
     size = max(1, min(50, n // (workers * 4) or 1))
     chunks = [seeds[i:i + size] for i in range(0, n, size)]

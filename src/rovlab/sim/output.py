@@ -12,7 +12,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rovlab.io.report import write_figures, write_nees_figure, write_report_html
-from rovlab.io.timeseries import write_csv, write_mcap
+from rovlab.io.logs import write_csv
+from rovlab.io.timeseries import write_mcap
 from rovlab.sim.runner import SimResult
 
 # the columns of the timeseries.csv contract come first, in this order
@@ -62,7 +63,9 @@ def write_run(out_dir: str | Path, result: SimResult, metrics: Mapping[str, Any]
     written: dict[str, Path] = {}
     notes = notes if notes is not None else []
     cols = ordered_columns(result)
-    written["timeseries.csv"] = write_csv(out / "timeseries.csv", cols)
+    words = result.status_words()  # sensor status as the words `rovlab filter` writes
+    write_csv(out / "timeseries.csv", {k: words.get(k, v) for k, v in cols.items()}, exact=("time_s",))
+    written["timeseries.csv"] = out / "timeseries.csv"
     written["metrics.json"] = write_json(out / "metrics.json", metrics)
     if mcap:
         try:

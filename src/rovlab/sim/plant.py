@@ -1,67 +1,82 @@
-"""Plants for the closed-loop simulator, as compiled kernels that advance one control period.
+"""Plants for the closed-loop simulator: components of the plant slot (rovlab.core.components).
 
-* Process plant (SPEC section 4): x = [x, y, z, psi, u, v, w, r] integrated with fixed-step RK4;
-  the force on the body is tau (from the thrusters) + b (Gauss-Markov biases, advanced by the
-  runner with their exact discrete form) + w_nu (white noise of power spectral density W, held
-  over each RK4 step as N(0, W / h), the zero-order-hold equivalent of white noise). The
-  restoring force is in the packed parameters (rovlab.models.kinetics.pack).
-* Observer plant ("perfect model"): the linear depth-and-heading model with its bias states,
-  advanced exactly: x_{k+1} = Phi_h x_k + Delta_h u + L_h n_k, L_h L_h^T = Q_h (Van Loan at the
-  plant step), so the filter's assumptions hold exactly.
+* :class:`ProcessPlant` (SPEC section 4): x = [x, y, z, psi, u, v, w, r] integrated with
+  fixed-step RK4 on the one right-hand side of the model (rovlab.models.kinetics.rhs_into); the
+  force on the body is tau (from the thrusters) + b (Gauss-Markov biases, advanced with their
+  exact discrete form) + w_nu (white noise of power spectral density W, held over each RK4 step
+  as N(0, W / h), the zero-order-hold equivalent of white noise). The restoring force is in the
+  packed parameters (rovlab.models.kinetics.pack).
+* :class:`ObserverPlant` ("perfect model"): the linear depth-and-heading model with its bias
+  states, advanced exactly: x_{k+1} = Phi_h x_k + Delta_h u + L_h n_k, L_h L_h^T = Q_h (Van Loan
+  at the plant step), so the filter's assumptions hold exactly. Its input is the wrench the
+  allocation asked for (Z, N), the same the filter predicts with.
 
 The standard normal draws are made beforehand with numpy's Generator from the run's seed and
-passed in, so a run is reproducible from its seed whatever compiles the loop.
+handed in through the loop's drive (rovlab.sim.loop.Drive), so a run is reproducible from its
+seed whatever compiles the loop.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from rovlab.models.kinetics import P_CUB, P_GZ, P_LIN, P_M, P_MINV, P_QUAD, P_XG, P_XUDOT, P_YG, P_YVDOT
+from rovlab.core.angles import wrap_angle
+from rovlab.core.components import register_plant
+from rovlab.models.kinetics import P_GZ, rk4_inplace
+
+
+class ProcessPlant(NamedTuple):
+    """The nonlinear 4-DOF process model with Gauss-Markov biases and white force noise."""
+
+    p: np.ndarray  # packed parameters of the true vehicle (rovlab.models.kinetics.pack)
+    x: np.ndarray  # state [x, y, z, psi, u, v, w, r]
+    bias: np.ndarray  # Gauss-Markov bias force per DOF (4)
+    bias_phi: np.ndarray  # exact discrete Gauss-Markov coefficients per control step (4)
+    bias_std: np.ndarray  # (4)
+    noise_std: np.ndarray  # sqrt(W / h_plant) of the white force noise (4)
+    h: float  # RK4 step [s]
+    n_sub: int  # RK4 steps per control step
+    k: np.ndarray  # (4, 8) RK4 work
+    f: np.ndarray  # (4) work
+    tb: np.ndarray  # (4) work
+
+    STATE = ("x", "bias")
+    DRAWS = 4  # standard normal draws per RK4 step
+
+
+class ObserverPlant(NamedTuple):
+    """The linear depth-and-heading model [z, psi, w, r, b_w, b_r], advanced exactly."""
+
+    Phi: np.ndarray  # (6, 6) at the plant step
+    Delta: np.ndarray  # (6, 2)
+    L: np.ndarray  # (6, 6), L L^T = Q at the plant step
+    x: np.ndarray  # (6)
+    n_sub: int
+    tmp: np.ndarray  # (6) work
+    u: np.ndarray  # (2) work
+
+    STATE = ("x",)
+    DRAWS = 6
 
 
 @njit(cache=True, inline="always")
-def _rhs(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, out):
-    """Time derivative of the 8-state process model into ``out`` (force f = tau + b + w)."""
-    c, s = np.cos(x3), np.sin(x3)
-    out[0] = c * x4 - s * x5
-    out[1] = s * x4 + c * x5
-    out[2] = x6
-    out[3] = x7
-    m = p[P_M]
-    a = m * (x5 + p[P_XG] * x7)
-    cc = m * (x4 - p[P_YG] * x7)
-    g0 = f0 - (-a + p[P_YVDOT] * x5) * x7 + (p[P_LIN] + p[P_QUAD] * abs(x4) + p[P_CUB] * x4 * x4) * x4
-    g1 = f1 - (cc - p[P_XUDOT] * x4) * x7 + (p[P_LIN + 1] + p[P_QUAD + 1] * abs(x5) + p[P_CUB + 1] * x5 * x5) * x5
-    g2 = f2 - p[P_GZ] + (p[P_LIN + 2] + p[P_QUAD + 2] * abs(x6) + p[P_CUB + 2] * x6 * x6) * x6
-    g3 = (f3 - ((a - p[P_YVDOT] * x5) * x4 + (-cc + p[P_XUDOT] * x4) * x5)
-          + (p[P_LIN + 3] + p[P_QUAD + 3] * abs(x7) + p[P_CUB + 3] * x7 * x7) * x7)
-    for i in range(4):
-        out[4 + i] = (p[P_MINV + 4 * i] * g0 + p[P_MINV + 4 * i + 1] * g1
-                      + p[P_MINV + 4 * i + 2] * g2 + p[P_MINV + 4 * i + 3] * g3)
-
-
-@njit(cache=True)
-def rk4_inplace(p: np.ndarray, x: np.ndarray, f: np.ndarray, h: float, k: np.ndarray) -> None:
-    """One RK4 step of the process model on x (in place); k is an (4, 8) work array."""
-    f0, f1, f2, f3 = f[0], f[1], f[2], f[3]
-    _rhs(p, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], f0, f1, f2, f3, k[0])
-    hh = 0.5 * h
-    _rhs(p, x[0] + hh * k[0, 0], x[1] + hh * k[0, 1], x[2] + hh * k[0, 2], x[3] + hh * k[0, 3],
-         x[4] + hh * k[0, 4], x[5] + hh * k[0, 5], x[6] + hh * k[0, 6], x[7] + hh * k[0, 7], f0, f1, f2, f3, k[1])
-    _rhs(p, x[0] + hh * k[1, 0], x[1] + hh * k[1, 1], x[2] + hh * k[1, 2], x[3] + hh * k[1, 3],
-         x[4] + hh * k[1, 4], x[5] + hh * k[1, 5], x[6] + hh * k[1, 6], x[7] + hh * k[1, 7], f0, f1, f2, f3, k[2])
-    _rhs(p, x[0] + h * k[2, 0], x[1] + h * k[2, 1], x[2] + h * k[2, 2], x[3] + h * k[2, 3],
-         x[4] + h * k[2, 4], x[5] + h * k[2, 5], x[6] + h * k[2, 6], x[7] + h * k[2, 7], f0, f1, f2, f3, k[3])
-    h6 = h / 6.0
+def _process_truth(plant, truth):
+    x = plant.x
     for i in range(8):
-        x[i] += h6 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+        truth[i] = x[i]
+    truth[3] = wrap_angle(x[3])
+    # the force the estimator's bias states should absorb: Gauss-Markov bias + net buoyancy
+    truth[8] = plant.bias[0]
+    truth[9] = plant.bias[1]
+    truth[10] = plant.bias[2] - plant.p[P_GZ]
+    truth[11] = plant.bias[3]
 
 
 @njit(cache=True)
-def process_advance(p: np.ndarray, x: np.ndarray, tau_b: np.ndarray, h: float, noise_std: np.ndarray,
-                    normals: np.ndarray, k: np.ndarray, f: np.ndarray) -> None:
+def process_advance(p, x, tau_b, h, noise_std, normals, k, f):
     """Advance the process plant over len(normals) RK4 steps of length h (in place).
 
     tau_b (4) is the thruster force plus the bias, held over the control period (ZOH);
@@ -74,9 +89,33 @@ def process_advance(p: np.ndarray, x: np.ndarray, tau_b: np.ndarray, h: float, n
         rk4_inplace(p, x, f, h, k)
 
 
+@njit(cache=True, inline="always")
+def _process_step(plant, drive, row, tau_cmd, tau_real):
+    n = plant.n_sub
+    tau_b = plant.tb
+    for i in range(4):
+        tau_b[i] = tau_real[i] + plant.bias[i]
+    process_advance(plant.p, plant.x, tau_b, plant.h, plant.noise_std,
+                    drive.plant_normals[row * n:(row + 1) * n], plant.k, plant.f)
+    for i in range(4):
+        plant.bias[i] = plant.bias_phi[i] * plant.bias[i] + plant.bias_std[i] * drive.bias_normals[row, i]
+
+
+@njit(cache=True, inline="always")
+def _observer_truth(plant, truth):
+    x = plant.x
+    for i in range(truth.shape[0]):
+        truth[i] = 0.0
+    truth[2] = x[0]
+    truth[3] = wrap_angle(x[1])
+    truth[6] = x[2]
+    truth[7] = x[3]
+    truth[10] = x[4]
+    truth[11] = x[5]
+
+
 @njit(cache=True)
-def linear_advance(Phi: np.ndarray, Delta: np.ndarray, L: np.ndarray, x: np.ndarray, u: np.ndarray,
-                   normals: np.ndarray, tmp: np.ndarray) -> None:
+def linear_advance(Phi, Delta, L, x, u, normals, tmp):
     """Advance x <- Phi x + Delta u + L n over len(normals) exact steps (in place)."""
     m = x.shape[0]
     for s in range(normals.shape[0]):
@@ -89,3 +128,17 @@ def linear_advance(Phi: np.ndarray, Delta: np.ndarray, L: np.ndarray, x: np.ndar
             tmp[i] = acc
         for i in range(m):
             x[i] = tmp[i]
+
+
+@njit(cache=True, inline="always")
+def _observer_step(plant, drive, row, tau_cmd, tau_real):
+    n = plant.n_sub
+    u = plant.u
+    u[0] = tau_cmd[2]
+    u[1] = tau_cmd[3]
+    linear_advance(plant.Phi, plant.Delta, plant.L, plant.x, u,
+                   drive.plant_normals[row * n:(row + 1) * n], plant.tmp)
+
+
+register_plant(ProcessPlant, truth=_process_truth, advance=_process_step)
+register_plant(ObserverPlant, truth=_observer_truth, advance=_observer_step)

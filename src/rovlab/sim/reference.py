@@ -10,32 +10,31 @@ the saturation-aware allocation.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+from rovlab.core.angles import wrap_angle as _wrap
 from rovlab.models import kinetics as kin
-from rovlab.sim.runner import PLANT_OBSERVER, Prepared
-
-
-def _wrap(a: float) -> float:
-    return a - 2.0 * math.pi * math.ceil((a - math.pi) / (2.0 * math.pi))
+from rovlab.sim.plant import ObserverPlant
+from rovlab.sim.runner import Prepared
 
 
 def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) -> dict[str, np.ndarray]:
     """Run the prepared scenario; returns logs {'true', 'x', 'P', 'u', 'pwm', 'y'} per control step."""
-    a = prep.arrays
     fm = prep.filter_model
     alloc = prep.allocator
     bank = alloc.bank
-    n_sub, hp = a["n_sub"], a["h_plant"]
-    n = a["n_ctrl"] if steps is None else steps
-    observer = a["plant_kind"] == PLANT_OBSERVER
-    xp = a["xp"].copy()
-    xo = a["xo"].copy()
-    bias = a["bias"].copy() if noise else np.zeros(4)
-    x = a["xf"].copy()
-    P = a["Pf"].copy()
+    plant, drive, sensors = prep.plant, prep.drive, prep.sensors
+    ctl = prep.design.controller.model
+    n_sub = plant.n_sub
+    n = prep.n_ctrl if steps is None else steps
+    observer = isinstance(plant, ObserverPlant)
+    xo = plant.x.copy() if observer else None
+    xp = None if observer else plant.x.copy()
+    bias = np.zeros(4) if observer or not noise else plant.bias.copy()
+    x = fm.x0.astype(float).copy()
+    P = fm.P0.astype(float).copy()
+    quantity = {2: 0, 3: 1, 6: 2, 7: 3}  # TRUTH index -> index in [z, psi, w, r]
+    ch_quantity = np.array([quantity[int(q)] for q in sensors.quantity])
     H, R = fm.H, fm.R
     offsets = np.array([c.offset for c in fm.channels])
     angle = np.array([c.angle for c in fm.channels])
@@ -44,10 +43,10 @@ def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) 
         truth = np.array([xo[0], _wrap(xo[1]), xo[2], xo[3]]) if observer else \
             np.array([xp[2], _wrap(xp[3]), xp[6], xp[7]])
         # sensors
-        present = np.array([k % a["ch_period"][j] == 0 and not a["dropout"][k, j] for j in range(len(offsets))])
-        y = truth[a["ch_quantity"]] + offsets
+        present = np.array([k % sensors.period[j] == 0 and not drive.dropout[k, j] for j in range(len(offsets))])
+        y = truth[ch_quantity] + offsets
         if noise:
-            y = y + a["ch_std"] * a["sensor_normals"][k]
+            y = y + sensors.std * drive.sensor_normals[k]
         y = np.where(angle, [_wrap(v) for v in y], y)
         # filter: stacked Joseph update with the present samples (offsets removed)
         if present.any():
@@ -65,14 +64,15 @@ def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) 
         logs["P"].append(P.copy())
         logs["y"].append(np.where(present, y, np.nan))
         # LQG law with the heading error wrapped
-        z_ref, psi_ref = a["refs"][k]
+        z_ref, psi_ref = drive.refs[k, 2], drive.refs[k, 3]
         psi_hat = psi_ref - _wrap(psi_ref - x[1])
-        u = a["Pref"] @ np.array([z_ref, psi_ref]) - a["K"] @ np.array([x[0], psi_hat, x[2], x[3]]) - x[4:6]
+        u = ctl.P @ np.array([z_ref, psi_ref]) - ctl.K @ np.array([x[0], psi_hat, x[2], x[3]]) - x[4:6]
         # allocation, PWM (quantised), real thrust
         f, _ = alloc.forces(np.array([0.0, 0.0, u[0], 0.0, 0.0, u[1]]))
         pwm = bank.pwm(f)
-        if a["pwm_res"] > 0:
-            pwm = a["pwm_res"] * np.round(pwm / a["pwm_res"])
+        res = prep.actuators.pwm_res
+        if res > 0:
+            pwm = res * np.round(pwm / res)
         achieved = alloc.B @ f
         u = np.array([achieved[2], achieved[5]])
         logs["u"].append(u)
@@ -84,14 +84,14 @@ def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) 
         # plant
         if observer:
             for s in range(n_sub):
-                w = a["L_p"] @ a["obs_normals"][k * n_sub + s] if noise else 0.0
-                xo = a["Phi_p"] @ xo + a["Delta_p"] @ u + w
+                w = plant.L @ drive.plant_normals[k * n_sub + s] if noise else 0.0
+                xo = plant.Phi @ xo + plant.Delta @ u + w
         else:
             real = alloc.B @ bank.force(pwm)
             tau = np.array([real[0], real[1], real[2], real[5]]) + bias
             for s in range(n_sub):
-                w = a["noise_std"] * a["plant_normals"][k * n_sub + s] if noise else 0.0
-                xp = kin.rk4_step(a["p_truth"], xp, tau + w, np.zeros(4), hp)
+                w = plant.noise_std * drive.plant_normals[k * n_sub + s] if noise else 0.0
+                xp = kin.rk4_step(plant.p, xp, tau + w, np.zeros(4), plant.h)
             if noise:
-                bias = a["bias_phi"] * bias + a["bias_std"] * a["bias_normals"][k]
+                bias = plant.bias_phi * bias + plant.bias_std * drive.bias_normals[k]
     return {k: np.array(v) for k, v in logs.items()}

@@ -5,9 +5,11 @@ initial state, the reference schedule, drop-out windows, the true disturbances a
 
     name = "dropout"
     description = "..."
-    source = "Sandøy 2016, fig. 5.4; SPEC section 7, case 3"
+    source = "Sandøy 2016, sec. 5.3.1 and fig. 5.4 (case 3)"
     vehicle = "udrone"              # packaged name, or a path relative to this file
     design = "thesis"               # filter/controller configuration (name or path)
+    estimator = "kf"                # optional: override the configuration's estimator / controller
+    controller = "lqg"
     plant = "process"               # "process": nonlinear 4-DOF model with thrusters, noise and
                                     # biases; "observer": the linear design model ("perfect model")
     duration_s = 60.0
@@ -52,7 +54,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rovlab.params.validate import Collector, PackagedFiles, TableReader, read_toml
+from rovlab.params.design import load_design_config
+from rovlab.params.vehicle import PLAUSIBLE, load_vehicle
+from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
 
 _DEG = math.pi / 180.0
 DOF_NAMES = ("surge", "sway", "heave", "yaw")
@@ -60,6 +64,23 @@ PLANTS = ("process", "observer")
 INITIAL_KEYS = {"x": 1.0, "y": 1.0, "z": 1.0, "heading_deg": _DEG, "u": 1.0, "v": 1.0, "w": 1.0,
                 "r_deg_s": _DEG}
 TRUTH_PARAMETERS = ("mass", "I_zz", "X_udot", "Y_vdot", "Z_wdot", "N_rdot", "displaced_volume")
+
+# Plausibility (issue 15: a plant step of 1e-9 s tried to allocate 46 GiB, 5e-324 overflowed, a
+# bias std of 1e15 N made the plant NaN). Ranges for a BlueROV-class vehicle, stated in
+# docs/simulation.md; vehicle quantities use the vehicle file's ranges (docs/vehicle-file.md).
+PLANT_STEP_RANGE = (1e-4, 1.0)  # [s]
+MAX_PLANT_STEPS = 10_000_000  # duration_s / plant_step_s: ~160 MB of random numbers per run
+POSITION_RANGE = (-1e4, 1e4)  # x, y, z [m]
+HEADING_RANGE_DEG = (-720.0, 720.0)
+SPEED_RANGE = (-10.0, 10.0)  # u, v, w [m/s]
+YAW_RATE_RANGE_DEG_S = (-720.0, 720.0)
+_INITIAL_RANGES = {"x": POSITION_RANGE, "y": POSITION_RANGE, "z": POSITION_RANGE, "heading_deg": HEADING_RANGE_DEG,
+                   "u": SPEED_RANGE, "v": SPEED_RANGE, "w": SPEED_RANGE, "r_deg_s": YAW_RATE_RANGE_DEG_S}
+PSD_RANGE = (0.0, 1e4)  # process-noise spectral density [N^2/Hz, (N m)^2/Hz]
+BIAS_STD_RANGE = {"surge": (0.0, 1e3), "sway": (0.0, 1e3), "heave": (0.0, 1e3), "yaw": (0.0, 1e2)}  # [N, N m]
+BIAS_TIME_RANGE = (0.1, 1e8)  # [s]
+BUOYANCY_OFFSET_RANGE = (-1e3, 1e3)  # [N]
+PWM_RESOLUTION_RANGE = (0.0, 100.0)  # [us]
 
 
 @dataclass(frozen=True)
@@ -95,6 +116,8 @@ class Scenario:
     pwm_resolution_us: float
     truth_parameters: Mapping[str, float]
     file: str = ""
+    estimator: str | None = None  # overrides the design configuration's choice
+    controller: str | None = None
 
     def reference_at(self, t: float) -> tuple[float, float]:
         k = int(np.searchsorted(self.reference_times, t, side="right")) - 1
@@ -140,8 +163,7 @@ def scenario_from_dict(data: Mapping[str, Any], *, file: str = "<dict>", seed: i
         col.add("seed", seed, "a non-negative integer")
     rng = np.random.default_rng(seed)
     concrete = _draw(copy.deepcopy(dict(data)), rng, col, "")
-    col.raise_if_any("scenario file")
-    return _read(concrete, col, file, seed)
+    return _read(concrete, col, file, seed)  # raises with every problem, the draw's included
 
 
 def _draw(node: Any, rng: np.random.Generator, col: Collector, path: str) -> Any:
@@ -189,20 +211,25 @@ def _resolve_relative(ref: str, file: str) -> str:
 def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenario:
     top = TableReader(data, col)
     top.raw("seed", 0)  # already handled
-    name = top.string("name")
+    name = top.name("name")
     description = top.string("description", "")
     source = top.string("source")
     vehicle = _resolve_relative(top.string("vehicle", "udrone"), file)
     design = _resolve_relative(top.string("design", "default"), file)
     plant = top.string("plant", "process", choices=PLANTS)
+    estimator = top.string("estimator", "") or None  # checked against the registry at prepare
+    controller = top.string("controller", "") or None
     duration = top.number("duration_s", positive=True, hi=1e6)
-    step = top.number("plant_step_s", 0.01, positive=True, hi=1.0)
+    step = top.number("plant_step_s", 0.01, positive=True, plausible=PLANT_STEP_RANGE, what="s")
+    if math.isfinite(duration) and math.isfinite(step) and duration / step > MAX_PLANT_STEPS:
+        top.problem("plant_step_s", step, f"at most {MAX_PLANT_STEPS:.0e} plant steps per run "
+                    f"(duration_s / plant_step_s is {duration / step:.3g}): a longer step or a shorter run")
 
     ini = top.table("initial", required=False)
     initial = np.zeros(8)
     order = ("x", "y", "z", "heading_deg", "u", "v", "w", "r_deg_s")
     for i, key in enumerate(order):
-        initial[i] = ini.number(key, 0.0) * INITIAL_KEYS[key]
+        initial[i] = ini.number(key, 0.0, plausible=_INITIAL_RANGES[key]) * INITIAL_KEYS[key]
     ini.finish()
 
     times: list[float] = []
@@ -212,8 +239,8 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
     psi_now = initial[3]
     for r in top.tables("reference", required=False):
         t = r.number("t_s", nonnegative=True)
-        z_now = r.number("z", z_now)
-        psi_now = r.number("heading_deg", psi_now / _DEG) * _DEG
+        z_now = r.number("z", z_now, plausible=POSITION_RANGE, what="m")
+        psi_now = r.number("heading_deg", psi_now / _DEG, plausible=HEADING_RANGE_DEG) * _DEG
         r.finish()
         if times and math.isfinite(t) and t <= times[-1]:
             r.problem("t_s", t, f"a time after the previous reference ({times[-1]:g} s)")
@@ -225,7 +252,7 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
 
     dropouts = []
     for d in top.tables("dropout", required=False):
-        target = d.string("sensor")
+        target = d.name("sensor")
         start = d.number("start_s", nonnegative=True)
         end = d.number("end_s", nonnegative=True)
         if math.isfinite(start) and math.isfinite(end) and end <= start:
@@ -235,22 +262,27 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
         dropouts.append(Dropout(sensor, channel or None, start, end))
 
     tr = top.table("truth", required=False)
-    psd = _dof_numbers(tr, "process_noise_psd", {"surge": 1e-2, "sway": 1e-2, "heave": 1e-2, "yaw": 1e-4})
-    bias_std = _dof_numbers(tr, "bias_std", {"surge": 0.2, "sway": 0.2, "heave": 0.3, "yaw": 0.005})
-    bias_T = _dof_numbers(tr, "bias_time_constant_s", {d: 60.0 for d in DOF_NAMES}, positive=True)
-    buoy = tr.number("buoyancy_offset", 0.0)
-    pwm_res = tr.number("pwm_resolution_us", 1.0, nonnegative=True)
+    psd = _dof_numbers(tr, "process_noise_psd", {"surge": 1e-2, "sway": 1e-2, "heave": 1e-2, "yaw": 1e-4},
+                       ranges={d: PSD_RANGE for d in DOF_NAMES})
+    bias_std = _dof_numbers(tr, "bias_std", {"surge": 0.2, "sway": 0.2, "heave": 0.3, "yaw": 0.005},
+                            ranges=BIAS_STD_RANGE)
+    bias_T = _dof_numbers(tr, "bias_time_constant_s", {d: 60.0 for d in DOF_NAMES}, positive=True,
+                          ranges={d: BIAS_TIME_RANGE for d in DOF_NAMES})
+    buoy = tr.number("buoyancy_offset", 0.0, plausible=BUOYANCY_OFFSET_RANGE, what="N")
+    pwm_res = tr.number("pwm_resolution_us", 1.0, nonnegative=True, plausible=PWM_RESOLUTION_RANGE, what="us")
     params = tr.table("parameters", required=False)
     truth_params: dict[str, float] = {}
     for key in TRUTH_PARAMETERS:
         if params.has(key):
             if key in ("mass", "I_zz", "displaced_volume"):
-                truth_params[key] = params.number(key, positive=True)
+                truth_params[key] = params.number(key, positive=True, plausible=PLAUSIBLE[key])
             else:
-                truth_params[key] = params.number(key, nonpositive=True, what="SNAME sign")
+                truth_params[key] = params.number(key, nonpositive=True, plausible=PLAUSIBLE["added_mass"],
+                                                  what="SNAME sign")
     params.finish()
     tr.finish()
     top.finish()
+    _check_references(top, vehicle, design, step, dropouts)
     col.raise_if_any("scenario file")
     return Scenario(
         name=name, description=description, source=source, vehicle=vehicle, design=design, plant=plant,
@@ -258,11 +290,73 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
         reference_times=np.array(times), reference_z=np.array(zs), reference_psi=np.array(psis),
         dropouts=tuple(dropouts), process_noise_psd=psd, bias_std=bias_std, bias_time_constant_s=bias_T,
         buoyancy_offset=buoy, pwm_resolution_us=pwm_res, truth_parameters=truth_params, file=file,
+        estimator=estimator, controller=controller,
     )
 
 
-def _dof_numbers(tr: TableReader, key: str, defaults: dict[str, float], positive: bool = False) -> np.ndarray:
+def _check_references(top: TableReader, vehicle: str, design: str, step: float,
+                      dropouts: list[Dropout]) -> None:
+    """Problems that need the files the scenario names, collected with the scenario's own (so a
+    file reports all its problems at once): the vehicle and the configuration load, the plant
+    step divides the filter's sample time, and each drop-out names a sensor channel of the vehicle.
+    """
+    v = _load_reference(top, "vehicle", vehicle, load_vehicle)
+    c = _load_reference(top, "design", design, load_design_config)
+    if c is not None and math.isfinite(step):
+        h = c.sample_time
+        n_sub = int(round(h / step))
+        if n_sub < 1 or abs(n_sub * step - h) > 1e-9 * h:
+            top.problem("plant_step_s", step, f"a step that divides the filter's sample time {h:g} s")
+    if v is None:
+        return
+    for i, d in enumerate(dropouts):
+        if not d.sensor:
+            continue
+        sensors = {s.name: s for s in v.sensors}
+        if d.sensor not in sensors:
+            top.collector.add(f"dropout[{i}].sensor", d.sensor,
+                              f"a sensor of vehicle {v.name!r}: " + ", ".join(sensors))
+        elif d.channel is not None and d.channel not in sensors[d.sensor].channels():
+            top.collector.add(f"dropout[{i}].sensor", f"{d.sensor}.{d.channel}",
+                              f"a channel of sensor {d.sensor!r}: "
+                              + ", ".join(f"{d.sensor}.{ch}" for ch in sensors[d.sensor].channels()))
+
+
+_REFERENCES: dict[tuple, Any] = {}
+
+
+def _load_reference(top: TableReader, key: str, ref: str, loader: Any) -> Any:
+    """Load a referenced vehicle/configuration (cached per file and modification time), adding
+    its problems under ``key``; None when it does not load."""
+    if not ref:
+        return None
+    try:
+        path = Path(ref)
+        stamp = path.stat().st_mtime_ns if path.exists() else None
+    except (OSError, ValueError):
+        stamp = None
+    cache_key = (key, ref, stamp)
+    if cache_key not in _REFERENCES:
+        try:
+            _REFERENCES[cache_key] = loader(ref)
+        except ConfigError as exc:
+            _REFERENCES[cache_key] = exc
+        except (OSError, ValueError) as exc:  # e.g. a NUL in the path
+            _REFERENCES[cache_key] = ConfigError([Problem(ref, "", ref, f"a readable file ({exc})")], key)
+        if len(_REFERENCES) > 64:
+            _REFERENCES.pop(next(iter(_REFERENCES)))
+    hit = _REFERENCES[cache_key]
+    if isinstance(hit, ConfigError):
+        for p in hit.problems:
+            top.problem(key, ref, f"a loadable {key}: {p}")
+        return None
+    return hit
+
+
+def _dof_numbers(tr: TableReader, key: str, defaults: dict[str, float], positive: bool = False,
+                 ranges: Mapping[str, tuple[float, float]] | None = None) -> np.ndarray:
     sub = tr.table(key, required=False)
-    out = np.array([sub.number(d, defaults[d], nonnegative=not positive, positive=positive) for d in DOF_NAMES])
+    out = np.array([sub.number(d, defaults[d], nonnegative=not positive, positive=positive,
+                               plausible=ranges[d] if ranges else None) for d in DOF_NAMES])
     sub.finish()
     return out

@@ -21,7 +21,8 @@ from typing import Any
 
 import tomlkit
 
-from rovlab.params.edit import DELETE, apply_edits, atomic_write_text, parse_path
+from rovlab.core.files import atomic_write_text
+from rovlab.params.edit import DELETE, apply_edits, parse_path
 from rovlab.params.validate import ConfigError, Problem
 
 Validator = Callable[[Mapping[str, Any], str], Any]

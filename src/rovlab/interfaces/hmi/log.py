@@ -21,7 +21,9 @@ from typing import Any
 import numpy as np
 
 from rovlab.io.messages import SENSOR_STATUS
-from rovlab.io.timeseries import write_csv, write_mcap
+from rovlab.core.files import atomic_write_text
+from rovlab.io.logs import write_csv
+from rovlab.io.timeseries import write_mcap
 
 _STATUS_CODE = {name: float(code) for code, name in SENSOR_STATUS.items()}
 # topic -> (field of the message, column prefix)
@@ -154,7 +156,8 @@ class SessionLog:
             for fmt in formats:
                 path = self.folder / f"{name}.{fmt}"
                 if fmt == "csv":
-                    written.append(write_csv(path, cols))
+                    write_csv(path, cols, exact=("time_s",))
+                    written.append(path)
                 elif fmt == "mcap":
                     meta = {"run": str(i), **(metadata or {})}
                     written.append(write_mcap(path, cols, metadata=meta))
@@ -162,9 +165,7 @@ class SessionLog:
                     raise ValueError(f"unknown log format {fmt!r}; expected csv or mcap")
         if self.events or written:
             events = self.folder / f"{self.stem}-events.json"
-            tmp = events.with_name(events.name + ".part")
-            tmp.write_text(json.dumps(self.events, indent=1, default=str) + "\n", encoding="utf-8")
-            tmp.replace(events)
+            atomic_write_text(events, json.dumps(self.events, indent=1, default=str) + "\n")
             written.append(events)
         return written
 

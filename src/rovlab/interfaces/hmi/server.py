@@ -23,9 +23,14 @@ Routes (bound to 127.0.0.1 only):
 
 Robustness: garbage, unknown commands and wrong types get an error frame on that connection only;
 a slow client loses data frames (counted) instead of slowing the others or the pacer; a client
-that disconnects is simply dropped. WebSocket connections from other web origins are refused
-(a page from elsewhere must not drive the vehicle), and so is any Host header other than
-localhost (DNS rebinding).
+that disconnects is simply dropped. Each client's commands are queued (at most
+``MAX_PENDING_COMMANDS``; more are refused with an error frame) and carried out one at a time,
+with the event loop given at least as long as each command took before the next one: a burst of
+commands from one client (200 ``set`` in a row) delays the pacer and the other clients by one
+command at a time, never by the whole burst. WebSocket connections from other web origins
+(including https://localhost: this server speaks plain http) are refused (a page from elsewhere
+must not drive the vehicle), and so is any Host header other than localhost (DNS rebinding); a
+malformed Host header gets 400, not 500.
 """
 
 from __future__ import annotations
@@ -61,6 +66,8 @@ _HEADERS = {
     "Referrer-Policy": "no-referrer",
 }
 MAX_MESSAGE_BYTES = 256 * 1024
+MAX_PENDING_COMMANDS = 64  # per client; a burst beyond this is refused, not queued
+COMMAND_REST_MAX_S = 0.05  # after a command the client's worker yields for as long as it took (capped)
 
 
 def _static_files() -> dict[str, tuple[bytes, str]]:
@@ -141,6 +148,8 @@ class _Client:
         self.pending_data = 0
         self.dropped = 0
         self.wake = asyncio.Event()
+        self.commands: deque[str] = deque()  # received, not yet carried out
+        self.command_ready = asyncio.Event()
 
     def send(self, text: str, *, data: bool = False) -> bool:
         if data and self.pending_data >= self.MAX_DATA:
@@ -226,7 +235,10 @@ class HmiServer:
 
     @web.middleware
     async def _local_only(self, request: web.Request, handler):
-        host = urlsplit(f"//{request.host}").hostname or ""
+        try:
+            host = urlsplit(f"//{request.host}").hostname or ""
+        except ValueError:  # e.g. "Host: [::1" (an unclosed IPv6 bracket) or a bad port
+            return web.Response(status=400, text="malformed Host header")
         if host not in _LOCAL_NAMES:
             return web.Response(status=403, text="this server answers to 127.0.0.1 / localhost only")
         response = await handler(request)
@@ -377,8 +389,13 @@ class HmiServer:
         origin = request.headers.get("Origin")
         if origin is None:
             return True  # not a browser page (a script, a test client)
-        parts = urlsplit(origin)
-        return parts.hostname in _LOCAL_NAMES and parts.netloc == request.host
+        try:
+            parts = urlsplit(origin)
+            hostname = parts.hostname
+        except ValueError:
+            return False
+        # this server speaks plain http: a page served over https (or any other scheme) is elsewhere
+        return parts.scheme == "http" and hostname in _LOCAL_NAMES and parts.netloc == request.host
 
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
         if not self._origin_ok(request):
@@ -389,12 +406,13 @@ class HmiServer:
         client = _Client(ws, self._next_id)
         self.clients.add(client)
         sender = asyncio.create_task(client.run())
+        worker = asyncio.create_task(self._command_worker(client))
         client.send(encode({"type": "hello", **self.session.info(), "pacing": self._pacing_brief()}))
         self.broadcast_state()  # everyone sees the client count
         try:
             async for msg in ws:
                 if msg.type == WSMsgType.TEXT:
-                    self._on_command(client, msg.data)
+                    self._enqueue(client, msg.data)
                 elif msg.type == WSMsgType.BINARY:
                     client.send(encode({"type": "error", "cmd": None,
                                         "message": "binary frames are not understood; send JSON text"}))
@@ -404,12 +422,39 @@ class HmiServer:
             pass
         finally:
             self.clients.discard(client)
-            sender.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await sender
+            for task in (worker, sender):
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await task
             if self.clients:
                 self.broadcast_state()
         return ws
+
+    def _enqueue(self, client: _Client, text: str) -> None:
+        """Queue a command of this client, or refuse it when too many are waiting."""
+        if len(client.commands) >= MAX_PENDING_COMMANDS:
+            ident = None
+            with contextlib.suppress(Exception):
+                head = json.loads(text) if len(text) < 4096 else None
+                if isinstance(head, dict) and isinstance(head.get("id"), (str, int)):
+                    ident = head["id"]
+            client.send(encode({"type": "error", "id": ident, "cmd": None,
+                                "message": f"too many commands waiting ({MAX_PENDING_COMMANDS}); this one was "
+                                           "dropped: wait for the replies before sending more"}))
+            return
+        client.commands.append(text)
+        client.command_ready.set()
+
+    async def _command_worker(self, client: _Client) -> None:
+        """Carry out one client's commands in order, resting after each as long as it took."""
+        while True:
+            await client.command_ready.wait()
+            client.command_ready.clear()
+            while client.commands:
+                text = client.commands.popleft()
+                t0 = time.perf_counter()
+                self._on_command(client, text)
+                await asyncio.sleep(min(time.perf_counter() - t0, COMMAND_REST_MAX_S))
 
     def _on_command(self, client: _Client, text: str) -> None:
         ident: Any = None

@@ -7,7 +7,7 @@ Commands are JSON objects ``{"cmd": NAME, ...}`` (an optional ``id`` is echoed i
 =================  =============================================================================
 ``start``          run (paced by the server at ``speed`` times real time)
 ``pause``          stop advancing
-``step``           ``n`` (default 1) control steps while paused
+``step``           ``n`` (default 1, at most 100) control steps while paused
 ``reset``          back to the scenario's start (tuned parameters are kept; a new log run begins)
 ``speed``          ``value``: 0.1 .. 50 times real time
 ``reference``      ``depth_m`` and/or ``heading_deg`` (degrees at the edge); ``schedule: true``
@@ -46,6 +46,8 @@ from rovlab.params.vehicle import resolve_vehicle_path, vehicle_from_dict
 
 TARGETS = ("vehicle", "truth", "config")
 SPEED_RANGE = (0.1, 50.0)
+MAX_STEPS_PER_COMMAND = 100  # 10 s of a 0.1 s loop: one client's "step" must not stall the others
+MAX_COMMAND_DEPTH = 16  # nesting of a command's JSON (a key path's value is at most a table of lists)
 _DEG = math.pi / 180.0
 _FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,100}\.toml$")
 _SCENARIO_TRUTH_KEYS = {  # scenario [truth.parameters] key -> vehicle-file key path
@@ -164,6 +166,9 @@ class Session:
         """Carry out one command (a dict parsed from JSON). Raises CommandError; then nothing changed."""
         if not isinstance(command, dict):
             raise CommandError(f"a command is a JSON object with a 'cmd' key, got {_kind(command)}")
+        if _depth_exceeds(command, MAX_COMMAND_DEPTH):
+            raise CommandError(f"a command nested deeper than {MAX_COMMAND_DEPTH} levels; expected a flat object "
+                               "whose values are numbers, text, or small tables and lists")
         name = command.get("cmd")
         if not isinstance(name, str):
             raise CommandError("a command needs 'cmd': one of " + ", ".join(sorted(_COMMANDS)))
@@ -189,7 +194,7 @@ class Session:
         return Outcome(state_changed=True, pacing_changed=True)
 
     def _step(self, c: dict) -> Outcome:
-        n = _integer(c, "n", 1, lo=1, hi=10000)
+        n = _integer(c, "n", 1, lo=1, hi=MAX_STEPS_PER_COMMAND)
         if self.running:
             raise CommandError("pause first: single steps are for a paused run")
         return Outcome(messages=self.advance(n), state_changed=True)
@@ -297,7 +302,7 @@ class Session:
         targets = TARGETS if target == "all" else (_target(c),)
         name = c.get("name")
         in_place = c.get("in_place", False)
-        if name is not None and (not isinstance(name, str) or not _FILE_NAME.match(name)):
+        if name is not None and (not isinstance(name, str) or not _FILE_NAME.fullmatch(name)):
             raise CommandError("name must be a plain file name ending in .toml (letters, digits, . _ -), "
                                f"got {name!r}", key="name")
         if name is not None and len(targets) != 1:
@@ -410,6 +415,23 @@ def _default_name(target: str, doc: ParameterDocument) -> str:
 # --------------------------------------------------------------------------------------------
 # Argument checks
 # --------------------------------------------------------------------------------------------
+
+def _depth_exceeds(value: Any, limit: int) -> bool:
+    """Whether nested dicts/lists go deeper than ``limit`` (iterative: no recursion to exhaust)."""
+    stack = [(value, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, dict):
+            children = node.values()
+        elif isinstance(node, list):
+            children = node
+        else:
+            continue
+        if depth > limit:
+            return True
+        stack.extend((child, depth + 1) for child in children)
+    return False
+
 
 def _kind(value: Any) -> str:
     if value is None:

@@ -1,0 +1,240 @@
+"""The slots of the closed loop: how a plant, an estimator and a controller plug into it.
+
+The simulator's compiled loop (:mod:`rovlab.sim.loop`) runs, at every control sample,
+
+    plant -> sensors -> estimator (correct) -> controller -> allocation and thrusters
+          -> estimator (predict) -> controller (actuated) -> plant (advance)
+
+and calls each component only through the slot functions below. A **component** is a
+``typing.NamedTuple`` of numpy arrays and scalars: its constants (gains, packed models, sizes
+taken from its model) and its state (covariance, channel states, integrators, adaptive
+parameters) as arrays that the kernels update in place. The class lists its state fields in a
+class attribute ``STATE`` (a tuple of field names), so a caller can copy, save and restore the
+state of any component without knowing what it is (:func:`fresh`, :func:`state_of`,
+:func:`restore`).
+
+Slot functions (all compiled; the arrays are float64 unless noted):
+
+``plant_truth(plant, truth)``
+    the true state at t_k into ``truth`` (N_TRUTH, layout TRUTH).
+``plant_advance(plant, drive, row, tau_cmd, tau_real)``
+    integrate from t_k to t_k + h with the wrench held: ``tau_cmd`` (4: X, Y, Z, N) is what the
+    allocation asked of the thrusters, ``tau_real`` (4) what their PWM commands really give;
+    ``drive`` holds the run's noise draws (row = this chunk's step index).
+``estimator_correct(est, t, y, present, rep)``
+    correct with the samples y (m) that arrived (present, bool); fill ``rep`` (m x N_REP of
+    rovlab.estimation.fusion). Every estimator has the fields ``x`` (n), ``P`` (n x n) and
+    ``ch`` (m x N_CH, the sensor-management state), which the loop reads after the correction.
+``estimator_predict(est, t, tau)``
+    project to t + h with the wrench tau (4: X, Y, Z, N) the allocation achieved.
+``controller_step(ctrl, t, nav, ref, tau)``
+    the demanded wrench tau (4: X, Y, Z, N) from the estimate ``nav`` (N_TRUTH, layout TRUTH;
+    entries the estimator does not estimate are 0) and the reference ``ref`` (4: x, y, z, psi).
+    Every controller has a field ``state`` (1-D, possibly empty) that the loop logs.
+``controller_actuated(ctrl, t, tau_demanded, tau_achieved)``
+    what the allocation could give (for anti-windup and adaptation); a no-op for most laws.
+
+Registering a component class binds its kernels to the slots (``register_plant``,
+``register_estimator``, ``register_controller``). The binding is resolved when the loop is
+compiled (numba ``overload``), so a loop compiled for one estimator and one controller contains
+those and nothing else, and is cached on disk per combination.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, NamedTuple
+
+import numpy as np
+from numba.core import types
+from numba.core.errors import TypingError
+from numba.extending import overload
+
+# Layout of the truth vector and of the estimate handed to controllers (world position and
+# heading, body velocities, and the force/moment biases per DOF).
+TRUTH = ("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N")
+N_TRUTH = len(TRUTH)
+TRUTH_INDEX = {name: i for i, name in enumerate(TRUTH)}
+ANGLES = frozenset({"psi"})
+# Layout of the reference vector and of a wrench.
+REFERENCE = ("x", "y", "z", "psi")
+WRENCH = ("X", "Y", "Z", "N")
+
+_REGISTRY: dict[str, dict[type, Callable[..., Any]]] = {
+    "plant_truth": {}, "plant_advance": {},
+    "estimator_correct": {}, "estimator_predict": {},
+    "controller_step": {}, "controller_actuated": {},
+}
+
+
+def _check_class(cls: type) -> None:
+    if not (isinstance(cls, type) and issubclass(cls, tuple) and hasattr(cls, "_fields")):
+        raise TypeError(f"{cls!r} is not a NamedTuple class")
+    state = getattr(cls, "STATE", None)
+    if not isinstance(state, tuple) or any(s not in cls._fields for s in state):
+        raise TypeError(f"{cls.__name__}.STATE must be a tuple of its field names")
+
+
+def register_plant(cls: type, *, truth: Callable, advance: Callable) -> None:
+    """Bind a plant class: truth(plant, truth), advance(plant, drive, row, tau_cmd, tau_real)."""
+    _check_class(cls)
+    _REGISTRY["plant_truth"][cls] = truth
+    _REGISTRY["plant_advance"][cls] = advance
+
+
+def register_estimator(cls: type, *, correct: Callable, predict: Callable) -> None:
+    """Bind an estimator class: correct(est, t, y, present, rep), predict(est, t, tau)."""
+    _check_class(cls)
+    for f in ("x", "P", "ch"):
+        if f not in cls._fields:
+            raise TypeError(f"an estimator needs the field {f!r}; {cls.__name__} has {cls._fields}")
+    _REGISTRY["estimator_correct"][cls] = correct
+    _REGISTRY["estimator_predict"][cls] = predict
+
+
+def register_controller(cls: type, *, step: Callable, actuated: Callable | None = None) -> None:
+    """Bind a controller class: step(ctrl, t, nav, ref, tau), actuated(ctrl, t, tau_d, tau_a)."""
+    _check_class(cls)
+    if "state" not in cls._fields:
+        raise TypeError(f"a controller needs the field 'state'; {cls.__name__} has {cls._fields}")
+    _REGISTRY["controller_step"][cls] = step
+    _REGISTRY["controller_actuated"][cls] = actuated if actuated is not None else _no_actuated
+
+
+def _no_actuated(ctrl, t, tau_demanded, tau_achieved):  # pragma: no cover - compiled
+    return None
+
+
+# --------------------------------------------------------------------------------------------
+# Copying state without knowing the component
+# --------------------------------------------------------------------------------------------
+
+def fresh(component: NamedTuple) -> NamedTuple:
+    """The component with its own copies of its state arrays (the constants are shared)."""
+    return component._replace(**{f: np.array(getattr(component, f), copy=True)
+                                 for f in component.STATE})  # type: ignore[attr-defined]
+
+
+def state_of(component: NamedTuple) -> dict[str, np.ndarray]:
+    """A copy of the component's state, by field name."""
+    return {f: np.array(getattr(component, f), copy=True) for f in component.STATE}  # type: ignore[attr-defined]
+
+
+def restore(component: NamedTuple, state: dict[str, np.ndarray]) -> list[str]:
+    """Copy saved state into the component where the field exists and the shape matches;
+    returns the fields that were restored."""
+    done = []
+    for f in component.STATE:  # type: ignore[attr-defined]
+        if f in state:
+            target = getattr(component, f)
+            src = np.asarray(state[f])
+            if src.shape == target.shape:
+                target[...] = src
+                done.append(f)
+    return done
+
+
+# --------------------------------------------------------------------------------------------
+# Slot functions (resolved at compile time)
+# --------------------------------------------------------------------------------------------
+
+def plant_truth(plant, truth):  # pragma: no cover - replaced by the compiled binding
+    raise NotImplementedError("slot functions run only inside compiled code")
+
+
+def plant_advance(plant, drive, row, tau_cmd, tau_real):  # pragma: no cover
+    raise NotImplementedError("slot functions run only inside compiled code")
+
+
+def estimator_correct(est, t, y, present, rep):  # pragma: no cover
+    raise NotImplementedError("slot functions run only inside compiled code")
+
+
+def estimator_predict(est, t, tau):  # pragma: no cover
+    raise NotImplementedError("slot functions run only inside compiled code")
+
+
+def controller_step(ctrl, t, nav, ref, tau):  # pragma: no cover
+    raise NotImplementedError("slot functions run only inside compiled code")
+
+
+def controller_actuated(ctrl, t, tau_demanded, tau_achieved):  # pragma: no cover
+    raise NotImplementedError("slot functions run only inside compiled code")
+
+
+def _lookup(slot: str, comp_type) -> Callable:
+    cls = getattr(comp_type, "instance_class", None)
+    if isinstance(comp_type, types.BaseNamedTuple) and cls in _REGISTRY[slot]:
+        return _REGISTRY[slot][cls]
+    raise TypingError(f"{slot}: {cls.__name__ if cls else comp_type} is not registered "
+                      f"(rovlab.core.components.register_*)")
+
+
+@overload(plant_truth, inline="always", jit_options={"cache": True})
+def _ol_plant_truth(plant, truth):
+    fn = _lookup("plant_truth", plant)
+    return lambda plant, truth: fn(plant, truth)
+
+
+@overload(plant_advance, inline="always", jit_options={"cache": True})
+def _ol_plant_advance(plant, drive, row, tau_cmd, tau_real):
+    fn = _lookup("plant_advance", plant)
+    return lambda plant, drive, row, tau_cmd, tau_real: fn(plant, drive, row, tau_cmd, tau_real)
+
+
+@overload(estimator_correct, inline="always", jit_options={"cache": True})
+def _ol_estimator_correct(est, t, y, present, rep):
+    fn = _lookup("estimator_correct", est)
+    return lambda est, t, y, present, rep: fn(est, t, y, present, rep)
+
+
+@overload(estimator_predict, inline="always", jit_options={"cache": True})
+def _ol_estimator_predict(est, t, tau):
+    fn = _lookup("estimator_predict", est)
+    return lambda est, t, tau: fn(est, t, tau)
+
+
+@overload(controller_step, inline="always", jit_options={"cache": True})
+def _ol_controller_step(ctrl, t, nav, ref, tau):
+    fn = _lookup("controller_step", ctrl)
+    return lambda ctrl, t, nav, ref, tau: fn(ctrl, t, nav, ref, tau)
+
+
+@overload(controller_actuated, inline="always", jit_options={"cache": True})
+def _ol_controller_actuated(ctrl, t, tau_demanded, tau_achieved):
+    fn = _lookup("controller_actuated", ctrl)
+    if fn is _no_actuated:
+        return lambda ctrl, t, tau_demanded, tau_achieved: None
+    return lambda ctrl, t, tau_demanded, tau_achieved: fn(ctrl, t, tau_demanded, tau_achieved)
+
+
+# --------------------------------------------------------------------------------------------
+# What a component's builder returns (Python side: names and sizes for logs, checks, display)
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class EstimatorSpec:
+    """A designed estimator: its compiled component and what the loop needs to know of it."""
+
+    kernel: Any  # the component (a registered NamedTuple) with its initial state
+    states: tuple[str, ...]  # names of its states (log columns est_<name>)
+    nav: tuple[str, ...]  # per state, the TRUTH quantity it estimates
+    channels: tuple[Any, ...]  # the measurement channels it fuses (rovlab.estimation.model.Channel)
+    h: float  # sample time [s]
+    model: Any = None  # the design behind it (for display), e.g. a FilterModel
+
+    @property
+    def provides(self) -> frozenset[str]:
+        return frozenset(self.nav)
+
+
+@dataclass(frozen=True, eq=False)
+class ControllerSpec:
+    """A designed controller: its compiled component and what it needs from the estimate."""
+
+    kernel: Any
+    needs: tuple[str, ...]  # TRUTH quantities it reads from the estimate
+    references: tuple[str, ...]  # REFERENCE entries it follows
+    outputs: tuple[str, ...] = WRENCH  # WRENCH entries it commands (log columns tau_<name>)
+    state_names: tuple[str, ...] = ()  # names of the entries of kernel.state (log columns)
+    model: Any = None  # the design behind it (for display), e.g. an LQRDesign

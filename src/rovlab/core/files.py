@@ -1,0 +1,56 @@
+"""Atomic file writes: a reader never sees a half-written file, and a failed write (full disk,
+Ctrl-C) leaves the old file, if any, and no temporary file behind.
+
+:func:`atomic_open` is the one implementation (a temporary file in the same folder, flushed and
+``os.replace``d over the target; an existing file keeps its permission bits);
+:func:`atomic_write_text` and :func:`atomic_write_bytes` are its one-shot forms.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+from typing import IO, Iterator
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | Path, mode: str = "w", *, encoding: str | None = "utf-8") -> Iterator[IO]:
+    """Open a temporary file beside ``path`` for writing ("w" text or "wb" binary); on a clean
+    exit it replaces ``path``, on an exception it is removed and the exception propagates."""
+    if mode not in ("w", "wb"):
+        raise ValueError(f"atomic_open writes only ('w' or 'wb'), got {mode!r}")
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    keep_mode = path.stat().st_mode & 0o777 if path.exists() else None
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        if mode == "wb":
+            fh = os.fdopen(fd, "wb")
+        else:
+            fh = os.fdopen(fd, "w", encoding=encoding, newline="")
+        with fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        if keep_mode is None:
+            umask = os.umask(0)
+            os.umask(umask)
+            keep_mode = 0o666 & ~umask
+        os.chmod(tmp, keep_mode)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    with atomic_open(path, "w") as fh:
+        fh.write(text)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    with atomic_open(path, "wb") as fh:
+        fh.write(data)

@@ -1,0 +1,77 @@
+"""The depth-and-heading Kalman filter as a closed-loop component (estimator slot).
+
+A thin binding of the kernels of :mod:`rovlab.estimation.kalman` (correct with sensor
+management, Joseph updates; predict with Phi, Delta, Q) to the slots of
+:mod:`rovlab.core.components`: :class:`KalmanFilter` holds the filter's constants (the unpacked
+model arrays) and its state (x, P, the channel states), :func:`build` designs it from a vehicle
+and a configuration. The filter's input is [Z, N]: the heave force and yaw moment of the wrench
+the allocation achieved.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from rovlab.core.components import EstimatorSpec, register_estimator
+from rovlab.estimation.fusion import new_channel_state
+from rovlab.estimation.kalman import correct_arrays, pack_model, predict_arrays, unpack_model, work_size
+from rovlab.estimation.model import FilterModel, build_filter_model
+from rovlab.params.design import DesignConfig
+from rovlab.params.vehicle import Vehicle
+
+# what each state of the depth-and-heading model estimates (rovlab.core.components.TRUTH)
+_NAV = {"z": "z", "psi": "psi", "w": "w", "r": "r", "b_w": "b_Z", "b_r": "b_N"}
+_INPUTS = (2, 3)  # Z and N of the wrench [X, Y, Z, N]
+
+
+class KalmanFilter(NamedTuple):
+    Phi: np.ndarray
+    Delta: np.ndarray
+    Q: np.ndarray
+    H: np.ndarray
+    cfg: np.ndarray  # channel configuration (rovlab.estimation.fusion CFG_*)
+    wrap: np.ndarray  # 1.0 for angle states
+    sp: np.ndarray  # Phi in sparse form
+    inputs: np.ndarray  # int64: indices of the model's inputs in the wrench [X, Y, Z, N]
+    x: np.ndarray  # state estimate (n)
+    P: np.ndarray  # covariance (n x n)
+    ch: np.ndarray  # sensor-management state (m x N_CH)
+    u: np.ndarray  # (p) work
+    work: np.ndarray  # kernel scratch
+
+    STATE = ("x", "P", "ch")
+
+
+@njit(cache=True, inline="always")
+def _correct(est, t, y, present, rep):
+    correct_arrays(est.x, est.P, est.ch, est.H, est.cfg, est.wrap, t, y, present, rep, est.work)
+
+
+@njit(cache=True, inline="always")
+def _predict(est, t, tau):
+    for i in range(est.inputs.shape[0]):
+        est.u[i] = tau[est.inputs[i]]
+    predict_arrays(est.x, est.P, est.Delta, est.Q, est.wrap, est.sp, est.u, est.work)
+
+
+register_estimator(KalmanFilter, correct=_correct, predict=_predict)
+
+
+def from_model(fm: FilterModel) -> KalmanFilter:
+    """The component of a designed filter model, at its initial belief."""
+    packed = pack_model(fm.Phi, fm.Delta, fm.Q, fm.H, fm.channel_config(), fm.wrap_states())
+    Phi, Delta, Q, H, cfg, wrap, sp = (np.array(a, dtype=float, order="C") for a in unpack_model(packed))
+    n, m = fm.Phi.shape[0], len(fm.channels)
+    return KalmanFilter(Phi, Delta, Q, H, cfg, wrap, sp, np.array(_INPUTS, dtype=np.int64),
+                        fm.x0.astype(float).copy(), fm.P0.astype(float).copy(), new_channel_state(m),
+                        np.zeros(len(_INPUTS)), np.empty(work_size(n, m)))
+
+
+def build(vehicle: Vehicle, config: DesignConfig) -> EstimatorSpec:
+    """Design the depth-and-heading filter of a configuration (raises ConfigError)."""
+    fm = build_filter_model(vehicle, config)
+    return EstimatorSpec(kernel=from_model(fm), states=tuple(fm.states), nav=tuple(_NAV[s] for s in fm.states),
+                         channels=tuple(fm.channels), h=fm.h, model=fm)

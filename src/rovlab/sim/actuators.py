@@ -1,0 +1,72 @@
+"""Allocation and thrusters inside the closed loop: demanded wrench -> PWM -> real thrust.
+
+The demanded 4-DOF wrench [X, Y, Z, N] is allocated on the full 6-DOF wrench with K = M = 0
+(saturation-aware, rovlab.allocation), the thruster forces are turned into PWM commands,
+quantised to the ESC's resolution, and back into the thrust the thrusters really give
+(rovlab.models.thrusters). The estimator predicts with the wrench the allocation achieved; the
+plant feels the real one.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from rovlab.allocation.solvers import Allocator, allocate_kernel
+from rovlab.models.thrusters import ThrusterBank, bank_force, bank_pwm
+
+_DOF6 = (0, 1, 2, 5)  # X, Y, Z, N in the 6-DOF wrench [X, Y, Z, K, M, N]
+
+
+class Actuators(NamedTuple):
+    B: np.ndarray  # 6 x n configuration matrix (the model vehicle's, used to allocate)
+    T: np.ndarray  # allocator's pseudo-inverse
+    s: np.ndarray
+    f_min: np.ndarray
+    f_max: np.ndarray
+    level: np.ndarray  # priority level per DOF
+    n_levels: int
+    B_true: np.ndarray  # 6 x n of the true vehicle (what the thrust really does)
+    rows: np.ndarray  # thruster bank of the true vehicle
+    grid_pwm: np.ndarray
+    grid_force: np.ndarray
+    pwm_res: float  # ESC resolution [us]; 0 = continuous
+    tau6: np.ndarray  # (6) work
+
+
+def make_actuators(allocator: Allocator, bank: ThrusterBank, B_true: np.ndarray, pwm_res: float) -> Actuators:
+    return Actuators(allocator.B, allocator.T, allocator._s, allocator.f_min, allocator.f_max, allocator.level,
+                     int(allocator.n_levels), np.ascontiguousarray(B_true, dtype=float), bank.rows, bank.grid_pwm,
+                     bank.grid_force, float(pwm_res), np.zeros(6))
+
+
+@njit(cache=True, inline="always")
+def actuate(act, tau, tau_cmd, tau_real, pwm):
+    """Allocate the demanded wrench tau (4); fill the achieved wrench tau_cmd (4), the real one
+    tau_real (4) and the PWM commands pwm (n thrusters)."""
+    tau6 = act.tau6
+    tau6[:] = 0.0
+    tau6[0] = tau[0]
+    tau6[1] = tau[1]
+    tau6[2] = tau[2]
+    tau6[5] = tau[3]
+    f, frac = allocate_kernel(act.B, act.T, act.s, act.f_min, act.f_max, tau6, act.level, act.n_levels, True)
+    cmd = bank_pwm(act.rows, act.grid_pwm, act.grid_force, f)
+    nt = cmd.shape[0]
+    if act.pwm_res > 0.0:
+        for i in range(nt):
+            cmd[i] = act.pwm_res * np.round(cmd[i] / act.pwm_res)
+    for i in range(nt):
+        pwm[i] = cmd[i]
+    f_real = bank_force(act.rows, act.grid_pwm, act.grid_force, cmd)
+    for a in range(4):
+        r = _DOF6[a]
+        acc = 0.0
+        acc_real = 0.0
+        for i in range(nt):
+            acc += act.B[r, i] * f[i]
+            acc_real += act.B_true[r, i] * f_real[i]
+        tau_cmd[a] = acc
+        tau_real[a] = acc_real

@@ -1,0 +1,198 @@
+"""The closed loop, compiled once per choice of components (SPEC sections 4, 5, 7).
+
+At control sample k (t_k = k h, h the estimator's sample time, 0.1 s for uDrone):
+
+1. the plant reports its true state at t_k,
+2. the sensors sample it (each at its own rate, with its noise and lever arm; none during a
+   drop-out window),
+3. the estimator corrects with the samples that arrived and reports x_k, P_k,
+4. the controller computes the demanded wrench from the estimate and the reference,
+5. the allocation turns it into thruster forces and PWM commands (quantised), and those into
+   the thrust the thrusters really give,
+6. the estimator predicts with the wrench the allocation achieved; the controller learns what
+   was achieved (anti-windup, adaptation),
+7. the plant is integrated from t_k to t_k+1 with the thrust held (zero-order hold).
+
+Row k - k0 of the logs holds t_k, the truth at t_k, the samples y_k, the corrected estimate,
+the reference and the commands of step k. The estimator, the controller and the plant are
+components (rovlab.core.components): :func:`run_loop` calls them only through their slots, so a
+new estimator or controller is one module plus its registration, and the loop is specialised
+(and cached on disk) per combination. Everything random comes in through :class:`Drive`, drawn
+beforehand from the run's seed by :func:`draw`, so a run is reproducible from its seed alone
+and a long run can be done in chunks (the live HMI does) with the same result.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from rovlab.core.angles import wrap_angle
+from rovlab.core.components import (
+    N_TRUTH, TRUTH_INDEX, controller_actuated, controller_step, estimator_correct, estimator_predict, plant_advance, plant_truth,
+)
+from rovlab.estimation.fusion import CH_REASON, CH_STATUS, EVENT_USED, N_REP, REP_EVENT, REP_INNOV, REP_S
+from rovlab.models.sensors import sample_sensors
+from rovlab.sim.actuators import actuate
+
+N_WRENCH_LOG = 8  # allocated X, Y, Z, N, then demanded X, Y, Z, N
+_PSI = TRUTH_INDEX["psi"]
+_DIVERGED = 1e9  # a true state beyond this (or not finite) means the plant has diverged
+
+
+class Drive(NamedTuple):
+    """Everything exogenous to the loop for rows 0 .. n-1 of a chunk."""
+
+    plant_normals: np.ndarray  # (n * n_sub, plant's DRAWS) float32: plant noise per integration step
+    bias_normals: np.ndarray  # (n, 4): Gauss-Markov bias drivers
+    sensor_normals: np.ndarray  # (n, m): measurement noise
+    dropout: np.ndarray  # (n, m) bool: no sample from channel j at row i
+    refs: np.ndarray  # (n, 4): reference [x, y, z, psi]
+
+
+class Logs(NamedTuple):
+    """What the loop records per row (named into columns by rovlab.sim.runner)."""
+
+    truth: np.ndarray  # (n, N_TRUTH)
+    y: np.ndarray  # (n, m) samples (NaN = none)
+    status: np.ndarray  # (n, m) channel status codes (rovlab.estimation.fusion STATUS_*)
+    reason: np.ndarray  # (n, m) why a channel is lost or off (REASON_*)
+    x: np.ndarray  # (n, n_x) corrected estimate
+    P: np.ndarray  # (n, n_x, n_x) its covariance
+    wrench: np.ndarray  # (n, N_WRENCH_LOG)
+    pwm: np.ndarray  # (n, thrusters)
+    cons: np.ndarray  # (n, 3): NIS sum, number of samples used, NEES
+    ctrl: np.ndarray  # (n, len(controller state))
+
+
+def new_logs(n: int, m: int, n_x: int, n_thrusters: int, n_ctrl_state: int) -> Logs:
+    return Logs(np.empty((n, N_TRUTH)), np.empty((n, m)), np.empty((n, m)), np.empty((n, m)), np.empty((n, n_x)),
+                np.empty((n, n_x, n_x)), np.empty((n, N_WRENCH_LOG)), np.empty((n, n_thrusters)),
+                np.empty((n, 3)), np.empty((n, n_ctrl_state)))
+
+
+def draw(rng: np.random.Generator, n: int, n_sub: int, plant_draws: int, m: int) -> tuple[np.ndarray, ...]:
+    """The random inputs of n control steps, in a fixed order: plant noise (single precision),
+    bias drivers, sensor noise. One chunk of N steps draws exactly what N chunks of one step do."""
+    plant = rng.standard_normal((n * n_sub, plant_draws), dtype=np.float32)
+    bias = rng.standard_normal((n, 4))
+    sensors = rng.standard_normal((n, m))
+    return plant, bias, sensors
+
+
+@njit(cache=True)
+def _nees(err, P, idx, L):
+    """err^T P^-1 err over the states idx, by Cholesky (NaN if that block is not positive definite)."""
+    n = idx.shape[0]
+    for j in range(n):
+        acc = P[idx[j], idx[j]]
+        for k in range(j):
+            acc -= L[j, k] * L[j, k]
+        if not acc > 0.0:
+            return np.nan
+        L[j, j] = math.sqrt(acc)
+        for i in range(j + 1, n):
+            acc = P[idx[i], idx[j]]
+            for k in range(j):
+                acc -= L[i, k] * L[j, k]
+            L[i, j] = acc / L[j, j]
+    total = 0.0
+    for i in range(n):  # forward substitution L z = e, accumulating z^T z
+        acc = err[i]
+        for k in range(i):
+            acc -= L[i, k] * err[k]
+        err[i] = acc / L[i, i]
+        total += err[i] * err[i]
+    return total
+
+
+@njit(cache=True)
+def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive, logs):
+    """Run control steps k0 .. k1-1 (t_k = k h). The components' state arrays are advanced in
+    place; ``drive`` and ``logs`` are indexed by row = k - k0. Returns the number of rows done:
+    k1 - k0, or fewer if the plant's true state stopped being finite (or beyond 1e9), in which
+    case the run stops there rather than log garbage.
+
+    nav_of (int64, n_x): the TRUTH index each estimator state estimates; nees_idx (int64): the
+    estimator states whose error enters the NEES (those the plant has a truth for); angle states
+    (psi) have their errors wrapped.
+    """
+    n = est.x.shape[0]
+    m = sensors.quantity.shape[0]
+    nt = act.rows.shape[0]
+    n_nees = nees_idx.shape[0]
+    rep = np.empty((m, N_REP))
+    y = np.empty(m)
+    present = np.empty(m, dtype=np.bool_)
+    truth = np.empty(N_TRUTH)
+    nav = np.zeros(N_TRUTH)
+    err = np.empty(n_nees)
+    chol = np.empty((n_nees, n_nees))
+    tau = np.zeros(4)
+    tau_cmd = np.zeros(4)
+    tau_real = np.zeros(4)
+    pwm = np.empty(nt)
+    # bound once: array fields read in the loop body
+    x = est.x
+    P = est.P
+    ch = est.ch
+    cstate = ctrl.state
+    refs = drive.refs
+    normals = drive.sensor_normals
+    dropout = drive.dropout
+    log_truth, log_y, log_status, log_reason = logs.truth, logs.y, logs.status, logs.reason
+    log_x, log_P = logs.x, logs.P
+    log_wrench, log_pwm, log_cons, log_ctrl = logs.wrench, logs.pwm, logs.cons, logs.ctrl
+    for k in range(k0, k1):
+        row = k - k0
+        t = k * h
+        # -- truth and sensors at t_k ---------------------------------------------------------
+        plant_truth(plant, truth)
+        for i in range(N_TRUTH):
+            if not abs(truth[i]) < _DIVERGED:
+                return row  # the plant diverged (absurd parameters or forces): stop, rows 0..row-1 hold
+            log_truth[row, i] = truth[i]
+        sample_sensors(sensors, truth, k, normals, dropout, row, y, present)
+        for j in range(m):
+            log_y[row, j] = y[j]
+        # -- estimator: correct -------------------------------------------------------------
+        estimator_correct(est, t, y, present, rep)
+        for i in range(n):
+            log_x[row, i] = x[i]
+            for jj in range(n):
+                log_P[row, i, jj] = P[i, jj]
+        nis = 0.0
+        used = 0
+        for j in range(m):
+            log_status[row, j] = ch[j, CH_STATUS]
+            log_reason[row, j] = ch[j, CH_REASON]
+            if rep[j, REP_EVENT] == EVENT_USED:
+                nis += rep[j, REP_INNOV] ** 2 / rep[j, REP_S]
+                used += 1
+        log_cons[row, 0] = nis
+        log_cons[row, 1] = used
+        for a in range(n_nees):
+            i = nees_idx[a]
+            e = x[i] - truth[nav_of[i]]
+            err[a] = wrap_angle(e) if nav_of[i] == _PSI else e
+        log_cons[row, 2] = _nees(err, P, nees_idx, chol)
+        # -- controller, allocation and thrusters ---------------------------------------------
+        for i in range(n):
+            nav[nav_of[i]] = x[i]
+        controller_step(ctrl, t, nav, refs[row], tau)
+        actuate(act, tau, tau_cmd, tau_real, pwm)
+        for i in range(nt):
+            log_pwm[row, i] = pwm[i]
+        for i in range(4):
+            log_wrench[row, i] = tau_cmd[i]
+            log_wrench[row, 4 + i] = tau[i]
+        for i in range(cstate.shape[0]):
+            log_ctrl[row, i] = cstate[i]
+        # -- estimator: predict; controller: what was achieved; plant to t_k+1 -----------------
+        estimator_predict(est, t, tau_cmd)
+        controller_actuated(ctrl, t, tau, tau_cmd)
+        plant_advance(plant, drive, row, tau_cmd, tau_real)
+    return k1 - k0

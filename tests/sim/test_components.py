@@ -1,0 +1,169 @@
+"""The simulator as components (issue 9): slots, one call site, state as values, clear refusals."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+from numba import njit
+
+from rovlab.core.components import ControllerSpec, fresh, register_controller, restore, state_of
+from rovlab.io.logs import read_log
+from rovlab.params.design import design_config_from_dict, packaged_config_path
+from rovlab.params.validate import ConfigError, read_toml
+from rovlab.sim import components as registry
+from rovlab.sim.live import LiveSimulation
+from rovlab.sim.montecarlo import run_many
+from rovlab.sim.runner import PlantDiverged, Simulation, prepare, run_prepared
+from rovlab.sim.scenario import load_scenario, load_scenario_data
+
+
+class HoldDepth(NamedTuple):
+    """A toy controller written the way docs/architecture.md says: a PI law on depth with its
+    integrator as state, nothing on heading."""
+
+    kp: float
+    ki: float
+    h: float
+    state: np.ndarray  # [integral of the depth error]
+
+    STATE = ("state",)
+
+
+@njit(cache=False)
+def _hold_step(ctrl, t, nav, ref, tau):
+    e = ref[2] - nav[2]
+    ctrl.state[0] += ctrl.h * e
+    tau[0] = 0.0
+    tau[1] = 0.0
+    tau[2] = ctrl.kp * e + ctrl.ki * ctrl.state[0] - nav[10]
+    tau[3] = 0.0
+
+
+register_controller(HoldDepth, step=_hold_step)
+
+
+def _build_hold(vehicle, config):
+    return ControllerSpec(kernel=HoldDepth(40.0, 4.0, config.sample_time, np.zeros(1)), needs=("z", "b_Z"),
+                          references=("z",), outputs=("Z",), state_names=("depth_integral",))
+
+
+@pytest.fixture
+def hold_registered(monkeypatch):
+    monkeypatch.setitem(registry.CONTROLLERS, "hold", _build_hold)
+
+
+def test_a_new_controller_is_one_module_plus_its_registration(hold_registered):
+    sc = load_scenario("step-process-model")
+    from dataclasses import replace
+
+    res = run_prepared(prepare(replace(sc, controller="hold")))
+    c = res.columns
+    assert abs(c["true_z"][-1] - 0.70) < 0.02  # the PI law holds the depth reference
+    assert "ctrl_depth_integral" in c and np.all(np.isfinite(c["ctrl_depth_integral"]))
+    assert c["ctrl_depth_integral"][-1] != 0.0  # its state was advanced and logged
+    assert "tau_Z" in c and "tau_N" not in c  # only the wrench entries it commands are logged
+
+
+def test_unknown_components_and_missing_estimates_are_refused_by_name():
+    data = read_toml(packaged_config_path("thesis"))
+    data["controller"] = "pid-of-my-dreams"
+    cfg = design_config_from_dict(data, file="my.toml")
+    with pytest.raises(ConfigError) as err:
+        prepare(load_scenario("step-process-model"), config=cfg)
+    msg = str(err.value)
+    assert "my.toml" in msg and "controller" in msg and "pid-of-my-dreams" in msg and "lqg" in msg
+
+
+def test_a_controller_needing_what_the_estimator_lacks_is_refused(monkeypatch):
+    def needs_x(vehicle, config):
+        spec = _build_hold(vehicle, config)
+        return ControllerSpec(kernel=spec.kernel, needs=("x", "z"), references=("z",), outputs=("Z",))
+
+    monkeypatch.setitem(registry.CONTROLLERS, "needs-x", needs_x)
+    from dataclasses import replace
+
+    with pytest.raises(ConfigError, match="estimates x"):
+        prepare(replace(load_scenario("step-process-model"), controller="needs-x"))
+
+
+def test_state_is_a_value_that_can_be_saved_and_restored():
+    prep = prepare(load_scenario("dropout"))
+    sim = Simulation(prep)
+    n = 100
+    from rovlab.sim.loop import Drive
+
+    def chunk(a, b):
+        d = prep.drive
+        return Drive(d.plant_normals[a * 10:b * 10], d.bias_normals[a:b], d.sensor_normals[a:b], d.dropout[a:b],
+                     d.refs[a:b])
+
+    sim.advance(chunk(0, n))
+    saved = {slot: state_of(c) for slot, c in sim.components().items()}
+    first = sim.advance(chunk(n, 2 * n))
+    for slot, comp in sim.components().items():  # rewind and run the same chunk again
+        assert restore(comp, saved[slot]) == list(type(comp).STATE)
+    sim.k = n
+    again = sim.advance(chunk(n, 2 * n))
+    np.testing.assert_array_equal(first.x, again.x)
+    np.testing.assert_array_equal(first.truth, again.truth)
+    # a Prepared is never changed by running it: fresh() copies the state
+    assert fresh(prep.design.estimator.kernel).x is not prep.design.estimator.kernel.x
+
+
+def test_batch_monte_carlo_and_live_go_through_the_same_loop_and_columns():
+    prep = prepare(load_scenario("step-process-model"))
+    batch = run_prepared(prep)
+    live = LiveSimulation("step-process-model")
+    live.advance(prep.n_ctrl)  # one chunk: the same draws in the same order as the batch run
+    for name, col in batch.columns.items():
+        np.testing.assert_array_equal(live.last_columns[name], col, err_msg=name)
+    assert list(live.last_columns) == list(batch.columns)
+    data, file = load_scenario_data("step-process-model")
+    mc = run_many(data, file, [prep.scenario.seed], workers=1)
+    np.testing.assert_array_equal(mc[0]["nees"], batch.nees)
+
+
+def test_a_diverging_plant_stops_the_run_with_a_clear_message():
+    from dataclasses import replace
+
+    sc = load_scenario("step-process-model")
+    prep = prepare(sc)
+    bad = prep.plant._replace(p=prep.plant.p.copy())
+    bad.p[:16] *= 1e12  # an absurd inverse mass matrix: the state explodes
+    with pytest.raises(PlantDiverged, match="diverged at t ="):
+        run_prepared(replace(prep, plant=bad))
+
+
+def test_simulate_writes_sensor_status_as_words_and_refuses_an_unwritable_out(tmp_path):
+    out = tmp_path / "run"
+    exe = [sys.executable, "-c", "import sys; from rovlab.interfaces.cli import main; sys.exit(main())"]
+    done = subprocess.run(exe + ["simulate", "dropout", "--out", str(out), "--no-figures"], capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    log = read_log(out / "timeseries.csv")
+    words = set(log.text["status_z_qualisys"])
+    assert {"ok", "lost-timeout"} <= words  # the words `rovlab filter` writes
+    blocker = tmp_path / "a-file"  # --out below a file: no folder can be made there (root or not)
+    blocker.write_text("x")
+    done = subprocess.run(exe + ["simulate", "dropout", "--out", str(blocker / "run"), "--no-figures"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2, done.stderr
+    assert "cannot write" in done.stderr and "Traceback" not in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "run"]  # nothing half-written
+
+
+def test_an_interrupted_monte_carlo_keeps_its_finished_runs():
+    data, file = load_scenario_data("step-observer-model")
+    calls = []
+
+    def progress(done, total):
+        calls.append(done)
+        if done == 2:
+            raise KeyboardInterrupt
+
+    out = run_many(data, file, [0, 1, 2, 3], workers=1, progress=progress)
+    assert [r["seed"] for r in out] == [0, 1]
