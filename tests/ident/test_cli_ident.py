@@ -395,7 +395,7 @@ def test_update_on_a_read_only_or_full_disk_fails_cleanly(capsys, tmp_path, vehi
     import errno
     import os
 
-    import rovlab.params.edit as edit
+    import rovlab.core.files as files  # the one atomic writer (params.edit writes through it)
 
     log = tmp_path / "rest.csv"
     run(capsys, "lab", "noise", "--seed", 3, "--samples", "300", "--out", log)
@@ -405,7 +405,7 @@ def test_update_on_a_read_only_or_full_disk_fails_cleanly(capsys, tmp_path, vehi
     def full_disk(fd):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(edit.os, "fsync", full_disk)
+    monkeypatch.setattr(files.os, "fsync", full_disk)
     code, _, err = run(capsys, "identify", "noise", log, "--no-plot", "--update", vehicle_copy)
     assert code == 2 and str(vehicle_copy) in err and "No space left on device" in err and "Traceback" not in err
     assert vehicle_copy.read_text(encoding="utf-8") == before

@@ -43,13 +43,14 @@ def test_kernel_equals_matrix_form(udrone, rng):
     for nu in _random_nu(rng, 50):
         tau = rng.normal(size=4) * 5
         b = rng.normal(size=4)
-        np.testing.assert_allclose(k.nu_dot(v, np.zeros(4), nu, tau, b), k.nu_dot_reference(v, nu, tau, b),
+        deep = np.array([0.0, 0.0, 1.0, 0.0])  # 1 m down: the matrix form has no free surface
+        np.testing.assert_allclose(k.nu_dot(v, deep, nu, tau, b), k.nu_dot_reference(v, nu, tau, b),
                                    rtol=1e-12, atol=1e-12)
 
 
 def test_restoring_makes_positively_buoyant_vehicle_rise(udrone):
     # B - W = 6.7 N (SPEC section 2): at rest with no thrust the vehicle accelerates up (z decreases)
-    acc = k.nu_dot(udrone, np.zeros(4), np.zeros(4), np.zeros(4))
+    acc = k.nu_dot(udrone, np.array([0.0, 0.0, 1.0, 0.0]), np.zeros(4), np.zeros(4))  # 1 m down
     assert acc[2] == pytest.approx(-(udrone.buoyancy - udrone.weight) / (7.31 + 14.57))
     assert acc[2] < 0
 
@@ -106,7 +107,7 @@ def test_rk4_converges_at_fourth_order(udrone):
 
 
 def test_linearisation_at_rest_is_the_depth_heading_model(udrone):
-    A, B = k.linearise(udrone, np.zeros(4), np.zeros(4), np.zeros(4))
+    A, B = k.linearise(udrone, np.array([0.0, 0.0, 1.0, 0.0]), np.zeros(4), np.zeros(4))  # 1 m deep
     Ac, Bc, _ = control_model(HeaveYawParams.from_vehicle(udrone))
     # states [x y z psi u v w r]: heave/yaw sub-block equals the control model (SPEC section 6)
     idx = [2, 3, 6, 7]

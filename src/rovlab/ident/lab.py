@@ -299,6 +299,9 @@ def _integration_vehicle(vehicle: Vehicle, dof: str, linear: bool) -> Vehicle:
     return vehicle.with_updates(damping_quadratic=quad, damping_cubic=cub)
 
 
+_TEST_DEPTH = 5.0  # [m] centre depth in the virtual tank tests: deep enough that the free surface never cuts the hull
+
+
 def _simulate_1dof(vehicle: Vehicle, dof: str, force_fn, duration_s: float, rate_hz: float,
                    substeps: int = 10, extra_force: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Integrate the 4-DOF model with a force on one DOF (net buoyancy cancelled unless heave).
@@ -318,11 +321,13 @@ def _simulate_1dof(vehicle: Vehicle, dof: str, force_fn, duration_s: float, rate
     n = int(round(duration_s * rate_hz)) + 1
     h = 1.0 / rate_hz / substeps
     x = np.zeros(8)
+    x[2] = _TEST_DEPTH  # in the basin, well below the free surface
+    x0 = x.copy()
     t = np.arange(n) / rate_hz
     pos, vel, frc = np.empty(n), np.empty(n), np.empty(n)
     tau = np.zeros(4)
     for k in range(n):
-        pos[k], vel[k] = x[i], x[4 + i]
+        pos[k], vel[k] = x[i] - x0[i], x[4 + i]  # position relative to the start
         frc[k] = force_fn(k, pos[k], vel[k])
         tau[i] = frc[k]
         for _ in range(substeps):

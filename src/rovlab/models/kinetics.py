@@ -28,8 +28,12 @@ P_YVDOT = 20  # Y_vdot
 P_LIN = 21  # 4 entries: X_u, Y_v, Z_w, N_r
 P_QUAD = 25  # 4 entries: X_|u|u, ...
 P_CUB = 29  # 4 entries: X_uuu, ...
-P_GZ = 33  # restoring force in the heave row, B - W (left-hand side)
-P_SIZE = 34
+P_GZ = 33  # restoring force in the heave row when submerged, B - W (left-hand side)
+P_ZWDOT = 34  # Z_wdot
+P_BUOY = 35  # buoyancy B when fully submerged [N]
+P_WEIGHT = 36  # weight W [N]
+P_HALF_H = 37  # half the hull's height [m]: the free surface cuts the hull when |z| < this
+P_SIZE = 38
 
 
 def J(psi: float) -> np.ndarray:
@@ -110,7 +114,31 @@ def pack(vehicle: Vehicle) -> np.ndarray:
     p[P_QUAD:P_QUAD + 4] = vehicle.damping_quadratic
     p[P_CUB:P_CUB + 4] = vehicle.damping_cubic
     p[P_GZ] = vehicle.buoyancy - vehicle.weight
+    p[P_ZWDOT] = vehicle.added_mass[2]
+    p[P_BUOY] = vehicle.buoyancy
+    p[P_WEIGHT] = vehicle.weight
+    p[P_HALF_H] = 0.5 * hull_height(vehicle)
     return p
+
+
+def hull_height(vehicle: Vehicle) -> float:
+    """The hull's height [m] for the free surface: the vehicle file's geometry, else the cube root
+    of the displaced volume (a box of that volume)."""
+    if vehicle.geometry is not None:
+        return float(vehicle.geometry.height)
+    return float(vehicle.displaced_volume) ** (1.0 / 3.0)
+
+
+_DEEP = 1e6  # a depth at which the hull is fully submerged whatever its size
+
+
+@njit(cache=True, inline="always")
+def submerged(p, z):
+    """Submerged fraction of the hull with its centre at depth z (z down, surface at 0): 1 below
+    z = h/2, 0 above z = -h/2, linear in between (a box-shaped hull breaching the surface)."""
+    hh = p[P_HALF_H]
+    s = (z + hh) / (2.0 * hh)
+    return 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
 
 
 @njit(cache=True, inline="always")
@@ -132,18 +160,22 @@ def rhs_into(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, out):
     # f - C(nu) nu - D(nu) nu - g (damping coefficients carry their negative SNAME sign)
     g0 = f0 - (-a + p[P_YVDOT] * x5) * x7 + (p[P_LIN] + p[P_QUAD] * abs(x4) + p[P_CUB] * x4 * x4) * x4
     g1 = f1 - (cc - p[P_XUDOT] * x4) * x7 + (p[P_LIN + 1] + p[P_QUAD + 1] * abs(x5) + p[P_CUB + 1] * x5 * x5) * x5
-    g2 = f2 - p[P_GZ] + (p[P_LIN + 2] + p[P_QUAD + 2] * abs(x6) + p[P_CUB + 2] * x6 * x6) * x6
+    # free surface: buoyancy and heave added mass scale with the submerged fraction s
+    s_sub = submerged(p, x2)
+    g2 = (f2 - (s_sub * p[P_BUOY] - p[P_WEIGHT])
+          + (p[P_LIN + 2] + p[P_QUAD + 2] * abs(x6) + p[P_CUB + 2] * x6 * x6) * x6)
     g3 = (f3 - ((a - p[P_YVDOT] * x5) * x4 + (-cc + p[P_XUDOT] * x4) * x5)
           + (p[P_LIN + 3] + p[P_QUAD + 3] * abs(x7) + p[P_CUB + 3] * x7 * x7) * x7)
-    for i in range(4):
-        out[4 + i] = (p[P_MINV + 4 * i] * g0 + p[P_MINV + 4 * i + 1] * g1
-                      + p[P_MINV + 4 * i + 2] * g2 + p[P_MINV + 4 * i + 3] * g3)
+    for i in (0, 1, 3):  # heave is decoupled in M (M_RB row z = [0, 0, m, 0], M_A diagonal)
+        out[4 + i] = (p[P_MINV + 4 * i] * g0 + p[P_MINV + 4 * i + 1] * g1 + p[P_MINV + 4 * i + 3] * g3)
+    out[6] = g2 / (p[P_M] - s_sub * p[P_ZWDOT])
 
 
 @njit(cache=True)
-def jacobian_into(p, x, A):
-    """Analytic Jacobian A = df/dx (8 x 8) of :func:`rhs_into` at x (the force enters affinely:
-    df/dtau = [0; M^-1]). Compiled, for an EKF's prediction inside the simulator loop."""
+def jacobian_into(p, x, f, A):
+    """Analytic Jacobian A = df/dx (8 x 8) of :func:`rhs_into` at x with the total force f (4);
+    the force enters affinely (df/dtau = [0; M^-1]) and matters only where the free surface cuts
+    the hull. Compiled, for an EKF's prediction inside the simulator loop."""
     u, v, r = x[4], x[5], x[7]
     m = p[P_M]
     x_g, y_g = p[P_XG], p[P_YG]
@@ -172,19 +204,31 @@ def jacobian_into(p, x, A):
     for i in range(4):
         nu_i = x[4 + i]
         G[i, i] += p[P_LIN + i] + 2.0 * p[P_QUAD + i] * abs(nu_i) + 3.0 * p[P_CUB + i] * nu_i * nu_i
-    for i in range(4):
+    s_sub = submerged(p, x[2])
+    m_w = p[P_M] - s_sub * p[P_ZWDOT]
+    for i in (0, 1, 3):
         for j in range(4):
             acc = 0.0
-            for k in range(4):
+            for k in (0, 1, 3):
                 acc += p[P_MINV + 4 * i + k] * G[k, j]
             A[4 + i, 4 + j] = acc
+    for j in range(4):
+        A[6, 4 + j] = G[2, j] / m_w
+    if 0.0 < s_sub < 1.0:  # inside the breach band the heave force and mass depend on z
+        ds = 1.0 / (2.0 * p[P_HALF_H])
+        w = x[6]
+        g2 = -(s_sub * p[P_BUOY] - p[P_WEIGHT]) + (p[P_LIN + 2] + p[P_QUAD + 2] * abs(w)
+                                                      + p[P_CUB + 2] * w * w) * w
+        # d/dz [(f_z + g2(z)) / m_w(z)], dg2/dz = -ds B, dm_w/dz = -ds Z_wdot
+        A[6, 2] = (-ds * p[P_BUOY]) / m_w + (f[2] + g2) * (ds * p[P_ZWDOT]) / (m_w * m_w)
 
 
 @njit(cache=True)
 def nu_dot_packed(p: np.ndarray, nu: np.ndarray, tau: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """nu_dot = M^-1 (tau + b - C(nu) nu - D(nu) nu - g) on a packed parameter vector."""
+    """nu_dot = M^-1 (tau + b - C(nu) nu - D(nu) nu - g) on a packed parameter vector, fully
+    submerged (for the free surface use :func:`plant_rhs` with the depth)."""
     out = np.empty(8)
-    rhs_into(p, 0.0, 0.0, 0.0, 0.0, nu[0], nu[1], nu[2], nu[3],
+    rhs_into(p, 0.0, 0.0, _DEEP, 0.0, nu[0], nu[1], nu[2], nu[3],
              tau[0] + b[0], tau[1] + b[1], tau[2] + b[2], tau[3] + b[3], out)
     return out[4:].copy()
 
@@ -230,12 +274,12 @@ def nu_dot(vehicle: Vehicle, eta: np.ndarray, nu: np.ndarray, tau: np.ndarray,
            b: np.ndarray | None = None) -> np.ndarray:
     """Body acceleration nu_dot for state (eta, nu), force tau and bias b (SPEC section 4).
 
-    eta is accepted for the signature's sake: with roll = pitch = 0 the restoring term does
-    not depend on the pose.
+    With roll = pitch = 0 the pose enters only through the depth: near the free surface
+    (|z| < half the hull's height) buoyancy and heave added mass fall with the submerged fraction.
     """
-    del eta
     bias = np.zeros(4) if b is None else np.asarray(b, dtype=float)
-    return nu_dot_packed(_packed(vehicle), np.asarray(nu, dtype=float), np.asarray(tau, dtype=float), bias)
+    x = np.concatenate([np.asarray(eta, dtype=float).ravel(), np.asarray(nu, dtype=float).ravel()])
+    return plant_rhs(_packed(vehicle), x, np.asarray(tau, dtype=float), bias)[4:]
 
 
 def eta_dot(eta: np.ndarray, nu: np.ndarray) -> np.ndarray:
@@ -255,15 +299,18 @@ def linearise(vehicle: Vehicle, eta0: np.ndarray, nu0: np.ndarray,
               tau0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Analytic Jacobians A = df/dx, B = df/dtau of x_dot = f(x, tau), x = [eta; nu].
 
-    The operating force tau0 does not enter the Jacobians (the model is affine in tau); it is
-    accepted so a call names the full operating point. Evaluated by the compiled
-    :func:`jacobian_into`, the same code an EKF runs inside the simulator.
+    The operating force tau0 enters only where the free surface cuts the hull (the heave mass
+    depends on the depth there). Evaluated by the compiled :func:`jacobian_into`, the same code
+    an EKF runs inside the simulator; B = M^-1 with the submerged heave added mass.
     """
-    del tau0
     x = np.concatenate([np.asarray(eta0, dtype=float).ravel(), np.asarray(nu0, dtype=float).ravel()])
+    f = np.zeros(4) if tau0 is None else np.asarray(tau0, dtype=float).ravel()
+    p = _packed(vehicle)
     A = np.empty((8, 8))
-    jacobian_into(_packed(vehicle), x, A)
-    B = np.vstack([np.zeros((4, 4)), np.linalg.inv(mass_matrix(vehicle))])
+    jacobian_into(p, x, f, A)
+    Minv = np.linalg.inv(mass_matrix(vehicle))
+    Minv[2, 2] = 1.0 / (p[P_M] - submerged(p, x[2]) * p[P_ZWDOT])
+    B = np.vstack([np.zeros((4, 4)), Minv])
     return A, B
 
 

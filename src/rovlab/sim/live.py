@@ -101,6 +101,8 @@ class LiveSimulation:
         for name, v in (("z", z), ("psi", psi)):
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise ValueError(f"reference {name} must be a finite number, got {v!r}")
+        if z is not None and z < 0:
+            raise ValueError(f"reference depth z must be >= 0 m (the free surface is z = 0), got {z!r}")
         zr, pr = self.reference
         self.reference = (float(z) if z is not None else zr, float(psi) if psi is not None else pr)
         self.reference_follows_scenario = False

@@ -25,7 +25,7 @@ from numba import njit
 
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import register_plant
-from rovlab.models.kinetics import P_GZ, rk4_inplace
+from rovlab.models.kinetics import P_BUOY, P_WEIGHT, rk4_inplace, submerged
 
 
 class ProcessPlant(NamedTuple):
@@ -71,7 +71,8 @@ def _process_truth(plant, truth):
     # the force the estimator's bias states should absorb: Gauss-Markov bias + net buoyancy
     truth[8] = plant.bias[0]
     truth[9] = plant.bias[1]
-    truth[10] = plant.bias[2] - plant.p[P_GZ]
+    net_up = submerged(plant.p, x[2]) * plant.p[P_BUOY] - plant.p[P_WEIGHT]
+    truth[10] = plant.bias[2] - net_up
     truth[11] = plant.bias[3]
 
 

@@ -240,7 +240,8 @@ def make_plant(design: Design, sc: Scenario, truth: Vehicle, n_sub: int,
         x0 = np.array([sc.initial[2], sc.initial[3], sc.initial[6], sc.initial[7], 0.0, 0.0])
         return ObserverPlant(Phi_p, Delta_p, L_p, x0, n_sub, np.empty(6), np.empty(2))
     p = kin.pack(truth)
-    p[kin.P_GZ] -= sc.buoyancy_offset
+    p[kin.P_BUOY] += sc.buoyancy_offset  # extra net buoyancy (positive = lighter), e.g. a float
+    p[kin.P_GZ] += sc.buoyancy_offset
     phi, std = gauss_markov_coefficients(sc.bias_std**2, 1.0 / sc.bias_time_constant_s, design.estimator.h)
     return ProcessPlant(p, sc.initial.astype(float).copy(), np.asarray(bias0, dtype=float).copy(),
                         np.asarray(phi, dtype=float), np.asarray(std, dtype=float),

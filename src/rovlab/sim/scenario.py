@@ -229,7 +229,8 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
     initial = np.zeros(8)
     order = ("x", "y", "z", "heading_deg", "u", "v", "w", "r_deg_s")
     for i, key in enumerate(order):
-        initial[i] = ini.number(key, 0.0, plausible=_INITIAL_RANGES[key]) * INITIAL_KEYS[key]
+        initial[i] = ini.number(key, 0.0, nonnegative=key == "z", plausible=_INITIAL_RANGES[key],
+                                what="m, depth below the free surface (z = 0)" if key == "z" else "") * INITIAL_KEYS[key]
     ini.finish()
 
     times: list[float] = []
@@ -239,7 +240,8 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
     psi_now = initial[3]
     for r in top.tables("reference", required=False):
         t = r.number("t_s", nonnegative=True)
-        z_now = r.number("z", z_now, plausible=POSITION_RANGE, what="m")
+        z_now = r.number("z", z_now, nonnegative=True, plausible=POSITION_RANGE,
+                         what="m, depth below the free surface (z = 0; the vehicle cannot be sent above it)")
         psi_now = r.number("heading_deg", psi_now / _DEG, plausible=HEADING_RANGE_DEG) * _DEG
         r.finish()
         if times and math.isfinite(t) and t <= times[-1]:
