@@ -118,9 +118,9 @@ def main() -> None:
     t0 = time.perf_counter()
     filt = DepthHeadingFilter.from_files("udrone", "thesis")
     t, u, y = make_log(filt, np.random.default_rng(SEED))
-    # the same filter without gate and transitional R uses exactly filterpy's samples and R
+    # the same filter without gate, recovery ramp and stuck check uses exactly filterpy's samples and R
     plain = DepthHeadingFilter(replace(filt.model, channels=tuple(
-        replace(c, gate_threshold=np.inf, recovery_variance_factor=1.0) for c in filt.model.channels)))
+        replace(c, gate_threshold=np.inf, recovery_samples=0, stuck_samples=0) for c in filt.model.channels)))
 
     def rovlab_offline():
         return filt.run(t, u, y)

@@ -146,3 +146,49 @@ def test_values_that_overflow_are_refused_naming_the_file():
     data["initial"] = dict(data["initial"], std={"z": 1e300, "psi_deg": 10.0})
     with pytest.raises(ConfigError, match=r"my.toml: initial.std.z: got 1e\+300"):
         design_config_from_dict(data, file="my.toml")
+
+
+def test_sensor_management_settings_that_destabilise_the_loop_are_refused():
+    # issue 10: recovery_variance_factor = 1 let the closed loop diverge (it is gone; the key is
+    # refused with the reason), and a start-up phase shorter than the design needs let the gate
+    # discard healthy sensors while the filter was still wrong (startup_s = 0 with P0 = 0: the
+    # closed loop left its depth by a metre).
+    udrone = load_vehicle("udrone")
+    data = _config()
+    data["fusion"] = dict(data["fusion"], recovery_variance_factor=1.0)
+    with pytest.raises(ConfigError, match=r"my.toml: fusion.recovery_variance_factor: got 1.0; .*recovery_time_s"):
+        design_config_from_dict(data, file="my.toml")
+    data = _config()
+    data["fusion"] = dict(data["fusion"], startup_s=0.0)
+    with pytest.raises(ConfigError, match=r"my.toml: fusion.startup_s \(measurements\[0\]\): got 0.0; expected at least"):
+        build_filter_model(udrone, design_config_from_dict(data, file="my.toml"))
+    data["fusion"] = dict(data["fusion"], startup_s=0.0, gate_probability=1.0)  # no gate: nothing to wait for
+    build_filter_model(udrone, design_config_from_dict(data, file="my.toml"))
+    data = _config()
+    data["fusion"] = dict(data["fusion"], stuck_window_s=0.2)  # 2 samples cannot show a variance
+    with pytest.raises(ConfigError, match=r"stuck_window_s: got 0.2; expected a window of at least 5 samples"):
+        build_filter_model(udrone, design_config_from_dict(data, file="my.toml"))
+
+
+def test_start_up_phase_from_the_design():
+    # the Riccati recursion from P0 converges in about a second for the thesis design (P0 = 0), and
+    # the steady-state error dynamics have a time constant of 0.3 s: 1.1 s + 5 x 0.3 s
+    from rovlab.estimation.model import startup_time
+
+    from scipy.linalg import solve_discrete_are
+
+    m = build_filter_model(load_vehicle("udrone"), load_design_config("thesis"))
+    assert all(c.startup_s == pytest.approx(2.59, abs=0.01) for c in m.channels)
+    # the error time constant, independently: steady-state prior covariance from scipy's DARE
+    P = solve_discrete_are(m.Phi.T, m.H.T, m.Q, m.R)
+    K = P @ m.H.T @ np.linalg.inv(m.H @ P @ m.H.T + m.R)
+    rho = max(abs(np.linalg.eigvals(m.Phi @ (np.eye(6) - K @ m.H))))
+    tau = -m.h / math.log(rho)
+    assert tau == pytest.approx(0.30, abs=0.01)
+    converge = startup_time(m.Phi, m.Q, m.H, m.R, m.P0, m.h, time_constants=0.0)
+    assert m.channels[0].startup_s == pytest.approx(converge + 5 * tau, rel=1e-6)
+    assert 0.5 < converge < 2.0
+    data = _config()
+    data["fusion"] = dict(data["fusion"], startup_s=10.0)
+    c = build_filter_model(load_vehicle("udrone"), design_config_from_dict(data))
+    assert all(ch.startup_s == 10.0 for ch in c.channels)

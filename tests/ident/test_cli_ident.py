@@ -98,6 +98,30 @@ def test_step_round_trip_and_update(capsys, tmp_path, vehicle_copy):
     assert v.added_mass[0] == pytest.approx(data["added_mass"], rel=1e-3)
 
 
+def test_step_with_the_vehicles_nonlinear_damping(capsys, tmp_path, vehicle_copy):
+    # issue 10, item 5: --vehicle holds the file's quadratic/cubic damping fixed (and gives the mass)
+    log = tmp_path / "relay.csv"
+    made = run_json(capsys, "lab", "step", "--dof", "sway", "--seed", 5, "--out", log)
+    assert "--vehicle udrone" in made["next"]
+    data = run_json(capsys, "identify", "step", log, "--dof", "sway", "--vehicle", "udrone", "--no-plot",
+                    "--update", vehicle_copy)
+    assert data["mass"] == pytest.approx(7.31)
+    assert data["fixed_damping"] == {"quadratic": pytest.approx(-21.66), "cubic": pytest.approx(-128.52)}
+    assert data["added_mass"] == pytest.approx(-12.70, rel=0.03)  # SPEC 2: Y_vdot
+    assert load_vehicle(vehicle_copy).added_mass[1] == pytest.approx(data["added_mass"], rel=1e-3)
+    code, out, _ = run(capsys, "identify", "step", log, "--dof", "sway", "--vehicle", "udrone", "--no-plot")
+    assert code == 0 and "held fixed (from udrone)" in out
+
+
+def test_step_needs_a_mass_or_a_vehicle(capsys, tmp_path):
+    log = tmp_path / "relay.csv"
+    run(capsys, "lab", "step", "--seed", 5, "--linear", "--out", log)
+    code, _, err = run(capsys, "identify", "step", log, "--no-plot")
+    assert code == 2 and "--mass" in err and "--vehicle" in err and "Traceback" not in err
+    code, _, err = run(capsys, "identify", "step", log, "--vehicle", "no_such_vehicle", "--no-plot")
+    assert code == 2 and "no_such_vehicle" in err and "Traceback" not in err
+
+
 def test_noise_round_trip_and_update(capsys, tmp_path, vehicle_copy):
     log = tmp_path / "rest.csv"
     run_json(capsys, "lab", "noise", "--seed", 8, "--out", log)

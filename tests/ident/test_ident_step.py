@@ -128,3 +128,48 @@ def test_undamped_dof_gives_zero_not_positive_damping(lab_table, heavy_vehicle):
     assert fit.linear_damping == pytest.approx(0.0, abs=1e-4)
     assert fit.added_mass == pytest.approx(heavy_vehicle.added_mass[3], rel=0.01)
     assert np.all(np.isfinite(fit.velocity_fit))
+
+
+@pytest.mark.parametrize("dof, seed", [("surge", 21), ("sway", 22), ("heave", 23), ("yaw", 24)])
+def test_known_nonlinear_damping_held_fixed_removes_the_added_mass_bias(lab_table, udrone_vehicle, dof, seed):
+    # Issue 10, item 5: on the virtual lab's default vehicle (uDrone with its full quadratic and
+    # cubic damping, SPEC 2) and default relay, the linear first-order model biases the added mass
+    # (8-17 %); with the vehicle's nonlinear damping held fixed it is recovered within 3 %.
+    v = udrone_vehicle
+    i = DOF4.index(dof)
+    table = lab_table(lab.relay_test(v, dof, seed=seed))
+    mass = v.I_zz if dof == "yaw" else v.mass
+    fixed = (v.damping_quadratic[i], v.damping_cubic[i])
+    fit = _fit(table, mass, bias=(dof == "heave"), damping=fixed)
+    assert fit.added_mass == pytest.approx(v.added_mass[i], rel=0.03)
+    assert fit.linear_damping == pytest.approx(v.damping_linear[i], rel=0.05)
+    assert fit.fixed_damping == fixed
+    assert fit.fit_percent > 99.0
+    if dof != "heave":  # heave's relay stays slow enough for the linear model (< 3 % off)
+        linear = _fit(table, mass, bias=False)
+        assert abs(linear.added_mass / v.added_mass[i] - 1) > 0.05  # the bias this removes
+
+
+def test_fixed_damping_of_zero_is_the_linear_fit(lab_table, udrone_vehicle):
+    table = lab_table(lab.relay_test(udrone_vehicle, "surge", seed=25, linear=True))
+    a = _fit(table, 7.31)
+    b = _fit(table, 7.31, damping=(0.0, 0.0))
+    assert a.added_mass == b.added_mass and b.fixed_damping == (0.0, 0.0)
+
+
+def test_positive_fixed_damping_is_refused():
+    t = np.arange(0, 40, 0.1)
+    force = np.where((t // 5) % 2 == 0, 2.0, -2.0)
+    _, xu, _, _ = step.responses(1.0, 0.1, force)
+    with pytest.raises(IdentificationError, match="SNAME signs"):
+        step.fit_step_response(t, force, 0.08 * xu, mass=7.31, damping=(18.0, 0.0))
+
+
+def test_nonlinear_simulation_matches_the_linear_responses_without_nonlinear_terms():
+    # with Q = C = 0 the RK4 integration reproduces the exact zero-order-hold responses
+    t = np.arange(0, 20, 0.1)
+    force = np.where((t // 4) % 2 == 0, 1.5, -1.5)
+    k, a = 0.08, 0.6
+    _, xu, _, vu = step.responses(a, 0.1, force)
+    x, v = step.simulate_nonlinear(k, a, 0.0, 0.0, 0.0, 0.0, 0.0, 0.1, force)
+    np.testing.assert_allclose(x, k * xu, atol=1e-7)

@@ -2,56 +2,113 @@
 
 Every fused measurement is a *channel* j (e.g. ``qualisys.z``) with a row h_j of H, a nominal
 variance R_j and its own management state. At each sample the compiled kernel
-:func:`manage_channels` decides, channel by channel, whether the sample is used:
+:func:`manage_channels` decides, channel by channel, whether the sample is used and with what
+weight. The design (docs/estimation.md explains it with its sources) follows one rule: **a test
+that involves the filter's prediction may reject a sample, but a sensor is only declared lost on
+evidence that does not depend on the filter being right**, because a filter that is wrong (an
+overconfident start, an unmodelled force, a model that does not match the plant) would otherwise
+throw away the very sensors that could correct it.
 
-* **no sample** (``present[j]`` false): nothing to use. If no finite sample has arrived for
-  longer than ``timeout`` the channel is declared LOST (reason TIMEOUT). The filter then simply
-  runs without that row -- dead reckoning when no channel is left.
+Checks that do not involve the filter (a sensor fault whatever the filter believes):
+
+* **timeout**: no finite sample for longer than ``timeout`` -> LOST (reason TIMEOUT);
 * **non-finite sample** (NaN or inf marked present): LOST at once (reason NONFINITE); the value
-  never reaches the state.
+  never reaches the state;
+* **stuck / variance check**: the samples are cut into blocks of ``CFG_STUCK_N`` samples; a
+  block whose scatter sum(y - mean y)^2 / R_j falls below the lower chi-square quantile
+  ``CFG_STUCK_BOUND`` (N - 1 dof, false-alarm probability 1e-9) is not noise of variance R_j:
+  the sensor repeats a frozen value -> LOST (reason STUCK) until a block scatters again. Motion
+  of the vehicle only adds scatter, so the check cannot be fooled by the filter or the model.
+
+Checks against the prediction:
+
 * **innovation gate**: with the prior x^-, P^- of this sample, nu = y - offset - h x^- (wrapped
-  to (-pi, pi] for angle channels) and S = h P^- h^T + R_eff; the sample passes when
-  nu^2 / S <= chi2_{1}(p) (the gate threshold; infinite = no gate). A failing sample is not used
+  to (-pi, pi] for angle channels) and S = h P^- h^T + R_j; the sample passes when
+  nu^2 / S <= chi2_{1}(p) (``CFG_GATE``; infinite = no gate). A failing sample is not used
   (event REJECTED); ``lose_after`` consecutive failures declare the channel LOST (reason GATE).
   Gating is done against the prior of the whole sample, so its outcome does not depend on the
   order of the channels.
+* **start-up phase**: until ``CFG_STARTUP`` seconds after the first step the gate is not
+  applied (every finite sample is used). The gate assumes a consistent filter, which a filter
+  that has just started is not: P0 = 0 in the thesis design, a wrong initial state, uDrone's
+  6.7 N of net buoyancy not yet in the bias estimate. The default length is computed from the
+  design (rovlab.estimation.model.startup_time): the Riccati recursion's convergence from P0
+  plus five time constants of the steady-state filter's error dynamics.
 * **consensus**: a sample that fails the gate is used anyway when another channel of the same
   state also fails it and the two samples agree with each other within the gate (chi-square on
-  their difference, variance R_i + R_j). Two independent sensors that agree with each other but
-  not with the prediction mean the prediction is wrong -- an overconfident prior (P0 = 0 in the
-  thesis design) or an unmodelled force such as uDrone's 6.7 N of buoyancy before the bias has
-  converged -- and rejecting them would leave the filter dead-reckoning on the wrong model.
-  Both samples must still pass the gate with R widened 1e4 times (as a returning sensor is
-  tested), so two sensors reporting the same absurd value do not overrule the model.
-* **recovery with a transitional variance**: a LOST channel whose sample passes the gate
-  (tested with R = factor * R_j) becomes RECOVERING: its variance starts at factor * R_j and
-  decays geometrically, R_eff = R_j * factor^(1 - s), s = (t - t_return) / ramp_time, to R_j,
-  when the channel is OK again. This avoids the jump in the velocity estimate that a sudden
-  return to a precise sensor causes (SPEC section 7, case 3).
-* **re-acquisition**: a LOST channel whose samples keep failing the gate for ``reacquire`` seconds
-  is re-admitted anyway (RECOVERING): a sensor that disagrees with the model for that long points
-  to a diverged estimate rather than to an outlier, and dead reckoning forever is the worse
-  failure. 0 disables this.
-* **manual override** (``ch[j, CH_MODE]``): MODE_OFF forces the channel off (status OFF, samples
-  ignored); releasing it to MODE_AUTO returns through the recovery path; MODE_ON uses every
-  finite sample without gating (the transitional variance still applies after a loss).
+  their difference, variance R_i + R_j): the prediction is what is wrong. Both samples must
+  still pass the gate with R widened 1e4 times, so two sensors reporting the same absurd value
+  do not overrule the model.
+* **persistence**: a sample that fails the gate right after a sample of the same channel that
+  failed it too, by the same amount (chi-square on the difference of the two innovations), is
+  used -- unless a witness (below) refutes it. An outlier is isolated; a deviation that persists
+  is a change the model missed (a rare large process-noise event, an unmodelled force), and
+  rejecting it makes the filter dead-reckon further from the truth with every sample. The
+  prediction was then overconfident: the variance of the measured state alone is widened so
+  that this innovation is a 1-sigma event (a covariance reset of that state), and the update
+  moves that state to the sample without dragging the velocity and bias estimates along through
+  P's correlations (their gains shrink as S grows). Scaling all of P instead (the adaptive
+  fading filter of Xia et al. 1994) claims the rates and biases are as wrong as the measured
+  state and kicked r_hat to several rad/s; spreading the change over the recovery ramp let the
+  estimate fall behind a real change of the truth. With no witness a sensor offset cannot be
+  told from such a change, and the sensor is followed (as after ``reacquire`` seconds anyway).
+* **re-acquisition**: a channel lost by the gate whose samples keep failing it for
+  ``reacquire`` seconds is re-admitted (RECOVERING) -- unless a *witness* refutes it: another
+  channel of the same state whose sample passes the gate and disagrees with this one beyond the
+  gate (chi-square on the difference, R_i + R_j). The model is then corroborated by an
+  independent sensor precise enough to tell, and the disagreeing sensor stays out (an offset
+  sensor). A witness too imprecise to separate the two samples says nothing. Without a
+  witness, disagreeing that long points to a diverged estimate rather than to an outlier, and
+  dead reckoning forever is the worse failure. 0 disables this.
+
+**Recovery** (a LOST channel whose sample is accepted): the correction is spread evenly over
+the next N = ``CFG_RAMP_N`` samples by under-weighting (Lear's underweighting; Zanetti, DeMars &
+Bishop 2010): the k-th sample after the return (k = 1..N) is used with
+
+    R_eff = R_j + (N - k) s,   s = h P^- h^T   (the prior variance of the measured quantity),
+
+i.e. with the gain g_k = s / (R_eff + s) <= 1 / (N - k + 1) on the measured state, whatever P
+has grown to during the drop-out. When the drop-out made s >> R_j, sample k removes 1/(N-k+1)
+of what is left of the error, so each of the N samples applies about 1/N of the correction (the
+other states move in proportion: their gains are scaled by the same factor). The covariance
+update uses the nominal R_j in the Joseph form, which is exact for any gain, so P stays the
+honest covariance of the under-weighted estimate (it shrinks as the error does) and the next
+sample's s reflects what is left. After N samples the channel is OK again. N = 0
+(``recovery_time_s = 0``) returns abruptly, as the thesis did.
+Every sample, returning or not, is gated with the filter's honest S = s + R_j: the
+under-weighting changes the gain, not what the filter believes.
+
+**Manual override** (``ch[j, CH_MODE]``): MODE_OFF forces the channel off (status OFF, samples
+ignored); releasing it to MODE_AUTO returns through the recovery path; MODE_ON uses every finite
+sample without gating (the recovery ramp still applies after a loss).
 
 Layouts (module constants, usable inside numba code):
 
 * ``cfg[j, :]`` (float64, m x N_CFG, constant): CFG_OFFSET (subtracted from the raw sample: the
   lever-arm correction z_VO = z_sensor - l_z), CFG_R (nominal variance), CFG_TIMEOUT [s],
   CFG_GATE (chi-square threshold on nu^2/S; inf = off), CFG_LOSE_AFTER (count), CFG_RAMP_TIME
-  [s] (0 = no ramp), CFG_RAMP_FACTOR (>= 1), CFG_ANGLE (1.0: wrap the innovation),
-  CFG_REACQUIRE [s] (0 = never), CFG_STATE (i when the row h_j of H is the unit vector e_i,
-  which enables a faster update; -1 for a general row).
+  [s] (for reports), CFG_RAMP_N (recovery samples N; 0 = abrupt), CFG_ANGLE (1.0: wrap the
+  innovation), CFG_REACQUIRE [s] (0 = never), CFG_STATE (i when the row h_j of H is the unit
+  vector e_i, which enables a faster update; -1 for a general row), CFG_STARTUP [s],
+  CFG_STUCK_N (samples per block; 0 = no stuck check), CFG_STUCK_BOUND (lower bound on the
+  block's scatter / R).
 * ``ch[j, :]`` (float64, m x N_CH, part of the belief): CH_STATUS (STATUS_*), CH_REASON
   (REASON_*, why it is lost/off), CH_MODE (MODE_*), CH_FAILS (consecutive gate failures),
   CH_LAST_T (time of the last finite sample; NaN = none yet, set to the first step's time),
-  CH_RAMP_T0 (start of the current recovery ramp), CH_FAIL_T0 (time of the first failure of the
-  current run).
+  CH_RAMP_T0 (time of the return), CH_FAIL_T0 (time of the first failure of the current run),
+  CH_T0 (time of the first step: start of the start-up phase), CH_RAMP_K (samples used since
+  the return), CH_STUCK (1 while
+  the last block was stuck), CH_BLK_N, CH_BLK_Y0, CH_BLK_S1, CH_BLK_S2 (the current block:
+  count, first value, sum and sum of squares of the deviations from it), CH_PREV_NU, CH_PREV_S
+  (innovation and its variance of the last sample that failed the gate).
 * ``rep[j, :]`` (float64, m x N_REP, per-step report): REP_EVENT (EVENT_*), REP_INNOV
-  (prior innovation, NaN without a usable sample), REP_S (its variance h P^- h^T + R_eff),
-  REP_R (R_eff used or that would be used).
+  (prior innovation, NaN without a usable sample), REP_S (its variance h P^- h^T + R_j, what
+  the gate tests), REP_R (the variance the sample is weighted with: R_j, or R_eff while
+  recovering).
+
+For logs, :func:`status_code` folds status and reason into one small integer whose label is
+``STATUS_CODE_LABELS[code]`` (0-3 are the STATUS_* codes themselves, so a log of plain statuses
+reads the same way, with 'lost' for an unknown reason).
 """
 
 from __future__ import annotations
@@ -64,34 +121,49 @@ from numba import njit
 from rovlab.core.angles import wrap_angle  # noqa: F401  (re-exported for the filter kernels)
 
 # channel configuration columns
-CFG_OFFSET, CFG_R, CFG_TIMEOUT, CFG_GATE, CFG_LOSE_AFTER, CFG_RAMP_TIME, CFG_RAMP_FACTOR, CFG_ANGLE, \
-    CFG_REACQUIRE, CFG_STATE = range(10)
-N_CFG = 10
+CFG_OFFSET, CFG_R, CFG_TIMEOUT, CFG_GATE, CFG_LOSE_AFTER, CFG_RAMP_TIME, CFG_RAMP_N, CFG_ANGLE, \
+    CFG_REACQUIRE, CFG_STATE, CFG_STARTUP, CFG_STUCK_N, CFG_STUCK_BOUND = range(13)
+N_CFG = 13
 # channel state columns
-CH_STATUS, CH_REASON, CH_MODE, CH_FAILS, CH_LAST_T, CH_RAMP_T0, CH_FAIL_T0 = range(7)
-N_CH = 7
+CH_STATUS, CH_REASON, CH_MODE, CH_FAILS, CH_LAST_T, CH_RAMP_T0, CH_FAIL_T0, CH_T0, CH_RAMP_K, CH_STUCK, \
+    CH_BLK_N, CH_BLK_Y0, CH_BLK_S1, CH_BLK_S2, CH_PREV_NU, CH_PREV_S = range(16)
+N_CH = 16
 # report columns
 REP_EVENT, REP_INNOV, REP_S, REP_R = range(4)
 N_REP = 4
 
 STATUS_OK, STATUS_RECOVERING, STATUS_LOST, STATUS_OFF = 0, 1, 2, 3
-REASON_NONE, REASON_TIMEOUT, REASON_NONFINITE, REASON_GATE, REASON_MANUAL = 0, 1, 2, 3, 4
+REASON_NONE, REASON_TIMEOUT, REASON_NONFINITE, REASON_GATE, REASON_MANUAL, REASON_STUCK = 0, 1, 2, 3, 4, 5
 MODE_AUTO, MODE_OFF, MODE_ON = 0, 1, 2
 EVENT_NONE, EVENT_USED, EVENT_REJECTED, EVENT_NONFINITE, EVENT_IGNORED = 0, 1, 2, 3, 4
 
 STATUS_NAMES = ("ok", "recovering", "lost", "off")
-REASON_NAMES = ("", "timeout", "nonfinite", "gate", "manual")
+REASON_NAMES = ("", "timeout", "nonfinite", "gate", "manual", "stuck")
 MODE_NAMES = ("auto", "off", "on")
 EVENT_NAMES = ("none", "used", "rejected", "nonfinite", "ignored")
+# status_code(status, reason) -> label; 0..3 coincide with STATUS_* (2: lost, reason unknown)
+STATUS_CODE_LABELS = ("ok", "recovering", "lost", "off", "lost-timeout", "lost-nonfinite", "lost-gate",
+                      "lost-manual", "lost-stuck")
 
+STUCK_FALSE_ALARM = 1e-9  # per block: probability that noise of variance R looks stuck
+
+
+@njit(cache=True)
+def status_code(status, reason) -> int:
+    """One integer for (status, reason): STATUS_* itself unless lost with a known reason, then
+    3 + reason (4 timeout, 5 nonfinite, 6 gate, 7 manual, 8 stuck); see STATUS_CODE_LABELS."""
+    s = int(status)
+    r = int(reason)
+    if s == STATUS_LOST and 1 <= r <= 5:
+        return 3 + r
+    return s
 
 
 def new_channel_state(m: int) -> np.ndarray:
     """Initial management state of m channels: OK, automatic, no sample seen yet."""
     ch = np.zeros((m, N_CH))
-    ch[:, CH_LAST_T] = np.nan
-    ch[:, CH_RAMP_T0] = np.nan
-    ch[:, CH_FAIL_T0] = np.nan
+    for col in (CH_LAST_T, CH_RAMP_T0, CH_FAIL_T0, CH_T0):
+        ch[:, col] = np.nan
     return ch
 
 
@@ -103,6 +175,14 @@ def status_label(status: int, reason: int) -> str:
     return name
 
 
+def code_label(code: float) -> str:
+    """The label of a :func:`status_code` value (or of a plain STATUS_* code)."""
+    c = int(code)
+    if not 0 <= c < len(STATUS_CODE_LABELS):
+        raise ValueError(f"{code!r} is not a sensor status code (0..{len(STATUS_CODE_LABELS) - 1})")
+    return STATUS_CODE_LABELS[c]
+
+
 _PENDING = -1.0  # REP_EVENT while the step's decisions are being made
 
 
@@ -112,7 +192,7 @@ def _fails_prior(rep, cfg, j):
     return not (nu * nu <= cfg[j, CFG_GATE] * rep[j, REP_S])
 
 
-_CONSENSUS_WIDENING = 1e4  # consensus only within the gate with R widened this much (as on recovery)
+_CONSENSUS_WIDENING = 1e4  # consensus only within the gate with R widened this much
 
 
 @njit(cache=True, inline="always")
@@ -120,7 +200,7 @@ def _plausible(rep, cfg, j):
     """Within the gate with the measurement variance widened by _CONSENSUS_WIDENING: rules out
     absurd samples (two sensors reporting the same garbage must not overrule the model)."""
     nu = rep[j, REP_INNOV]
-    return nu * nu <= cfg[j, CFG_GATE] * (rep[j, REP_S] + (_CONSENSUS_WIDENING - 1.0) * rep[j, REP_R])
+    return nu * nu <= cfg[j, CFG_GATE] * (rep[j, REP_S] + (_CONSENSUS_WIDENING - 1.0) * cfg[j, CFG_R])
 
 
 @njit(cache=True)
@@ -141,9 +221,103 @@ def _agrees_with_another(rep, cfg, value, j, m):
         d = value[j] - value[i]
         if cfg[j, CFG_ANGLE] != 0.0:
             d = wrap_angle(d)
-        if d * d <= cfg[j, CFG_GATE] * (rep[j, REP_R] + rep[i, REP_R]):
+        if d * d <= cfg[j, CFG_GATE] * (cfg[j, CFG_R] + cfg[i, CFG_R]):
             return True
     return False
+
+
+@njit(cache=True)
+def _witnessed(rep, cfg, value, j, m):
+    """Another channel of the same state refutes channel j's sample at this step: its own sample
+    passes the gate (it agrees with the prediction) and disagrees with channel j's beyond the gate
+    (chi-square on the difference, variance R_i + R_j). A witness too imprecise to tell the two
+    apart (the pressure sensor against a millimetre of Qualisys disagreement) says nothing."""
+    k = int(cfg[j, CFG_STATE])
+    if k < 0 or math.isnan(value[j]):
+        return False
+    for i in range(m):
+        if i == j or int(cfg[i, CFG_STATE]) != k or math.isnan(value[i]) or math.isnan(rep[i, REP_INNOV]):
+            continue
+        if _fails_prior(rep, cfg, i):
+            continue
+        d = value[j] - value[i]
+        if cfg[j, CFG_ANGLE] != 0.0:
+            d = wrap_angle(d)
+        if d * d > cfg[j, CFG_GATE] * (cfg[j, CFG_R] + cfg[i, CFG_R]):
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _stuck_check(ch, cfg, j, v):
+    """Feed one finite sample into the block variance check; returns 1 (block stuck), 0 (block
+    scatters like noise) or -1 (block not complete yet)."""
+    nb = int(cfg[j, CFG_STUCK_N])
+    if nb < 2:
+        return -1
+    cnt = int(ch[j, CH_BLK_N])
+    if cnt == 0:
+        ch[j, CH_BLK_Y0] = v
+        ch[j, CH_BLK_S1] = 0.0
+        ch[j, CH_BLK_S2] = 0.0
+    else:
+        d = v - ch[j, CH_BLK_Y0]
+        if cfg[j, CFG_ANGLE] != 0.0:
+            d = wrap_angle(d)
+        ch[j, CH_BLK_S1] += d
+        ch[j, CH_BLK_S2] += d * d
+    cnt += 1
+    if cnt < nb:
+        ch[j, CH_BLK_N] = cnt
+        return -1
+    ch[j, CH_BLK_N] = 0.0
+    s1 = ch[j, CH_BLK_S1]
+    scatter = ch[j, CH_BLK_S2] - s1 * s1 / nb  # sum of squared deviations from the block mean
+    return 1 if scatter < cfg[j, CFG_STUCK_BOUND] * cfg[j, CFG_R] else 0
+
+
+@njit(cache=True)
+def _inflate(P, H, cfg, j, nu, s):
+    """The prediction of channel j's quantity was found wrong (a jump the model missed): widen its
+    variance so that this innovation is a 1-sigma event, h P h^T + R = nu^2. For a unit row h = e_i
+    the jump is added to P_ii alone (a jump of that state, uncorrelated with the others: the
+    velocity and bias estimates are not dragged along); for a general row the covariance of the
+    correlated states is scaled (fading memory, P <- D P D). Both keep P positive semi-definite.
+    Returns the new h P h^T + R."""
+    r = cfg[j, CFG_R]
+    hph = s - r
+    extra = nu * nu - s
+    if not (hph > 0.0 and extra > 0.0):
+        return s
+    idx = int(cfg[j, CFG_STATE])
+    if idx >= 0:
+        P[idx, idx] += extra
+        return nu * nu
+    n = P.shape[0]
+    f = math.sqrt((nu * nu - r) / hph)
+    for i in range(n):
+        pi = 0.0
+        for k in range(n):
+            pi += P[i, k] * H[j, k]
+        if pi == 0.0:
+            continue  # uncorrelated with the measurement: untouched
+        for k in range(n):
+            P[i, k] *= f
+            P[k, i] *= f
+    return nu * nu
+
+
+@njit(cache=True, inline="always")
+def _weight(ch, cfg, j, status):
+    """Share g of the innovation the next sample may apply (1 = the normal Kalman update)."""
+    n_ramp = cfg[j, CFG_RAMP_N]
+    if n_ramp < 1.0:
+        return 1.0
+    if status == STATUS_LOST:
+        return 1.0 / n_ramp
+    if status == STATUS_RECOVERING:
+        return 1.0 / max(n_ramp - ch[j, CH_RAMP_K], 1.0)
+    return 1.0
 
 
 @njit(cache=True, inline="always")
@@ -152,8 +326,10 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
 
     x (n), P (n x n): the prior of this sample. ch (m x N_CH), cfg (m x N_CFG), H (m x n),
     y (m), present (m, bool), rep (m x N_REP). Output value (m): the offset-corrected sample of
-    each accepted channel, NaN for the others. Returns the number of accepted channels.
-    A non-finite t disables all samples of this step (they are treated as absent).
+    each accepted channel, NaN for the others; rep[:, REP_R] holds the variance each accepted
+    sample is to be weighted with (the covariance update uses the nominal CFG_R). Returns the
+    number of accepted channels. A non-finite t disables all samples of this step (they are
+    treated as absent).
     """
     m, n = H.shape
     t_ok = math.isfinite(t)
@@ -169,10 +345,9 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
         fails = int(ch[j, CH_FAILS])
         if t_ok and math.isnan(ch[j, CH_LAST_T]):
             ch[j, CH_LAST_T] = t  # the timeout counts from the first step
+        if t_ok and math.isnan(ch[j, CH_T0]):
+            ch[j, CH_T0] = t  # and so does the start-up phase
         r_nom = cfg[j, CFG_R]
-        factor = cfg[j, CFG_RAMP_FACTOR]
-        ramp = cfg[j, CFG_RAMP_TIME]
-        ramps = factor > 1.0 and ramp > 0.0
 
         if mode == MODE_OFF:
             ch[j, CH_STATUS] = STATUS_OFF
@@ -185,27 +360,16 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
         if status == STATUS_OFF:  # released by hand: come back through the recovery path
             status = STATUS_LOST
             reason = REASON_MANUAL
-
-        # variance this channel would be used with now
-        r_eff = r_nom
-        if status == STATUS_RECOVERING:
-            frac = 1.0
-            if ramps and t_ok:
-                frac = max((t - ch[j, CH_RAMP_T0]) / ramp, 0.0)
-            if frac >= 1.0:
-                status = STATUS_OK
-                reason = REASON_NONE
-            else:
-                r_eff = r_nom * factor ** (1.0 - frac)
-        elif status == STATUS_LOST and ramps:
-            r_eff = r_nom * factor
-        rep[j, REP_R] = r_eff
+        if status == STATUS_RECOVERING and ch[j, CH_RAMP_K] >= cfg[j, CFG_RAMP_N]:
+            status = STATUS_OK
+            reason = REASON_NONE
 
         if not (present[j] and t_ok):
             if t_ok and status != STATUS_LOST and t - ch[j, CH_LAST_T] > cfg[j, CFG_TIMEOUT]:
                 status = STATUS_LOST
                 reason = REASON_TIMEOUT
                 fails = 0
+            rep[j, REP_R] = r_nom
             ch[j, CH_STATUS] = status
             ch[j, CH_REASON] = reason
             ch[j, CH_FAILS] = fails
@@ -215,34 +379,53 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
         idx = int(cfg[j, CFG_STATE])
         if idx >= 0:
             hx = x[idx]
-            s = r_eff + P[idx, idx]
+            hph = P[idx, idx]
         else:
             hx = 0.0
-            s = r_eff
+            hph = 0.0
             for i in range(n):
                 hi = H[j, i]
                 if hi != 0.0:
                     hx += hi * x[i]
                     for k in range(n):
-                        s += hi * P[i, k] * H[j, k]
+                        hph += hi * P[i, k] * H[j, k]
         nu = v - hx
         if cfg[j, CFG_ANGLE] != 0.0:
             nu = wrap_angle(nu)
-        if not (math.isfinite(v) and math.isfinite(nu) and math.isfinite(s) and s > 0.0):
+        if not (math.isfinite(v) and math.isfinite(nu) and math.isfinite(hph) and hph + r_nom > 0.0):
             ch[j, CH_STATUS] = STATUS_LOST
             ch[j, CH_REASON] = REASON_NONFINITE
             ch[j, CH_FAILS] = 0.0
+            ch[j, CH_BLK_N] = 0.0
+            rep[j, REP_R] = r_nom
             rep[j, REP_EVENT] = EVENT_NONFINITE
             continue
         ch[j, CH_LAST_T] = t
+        stuck = _stuck_check(ch, cfg, j, v)
+        if stuck == 1 and mode != MODE_ON:
+            ch[j, CH_STUCK] = 1.0
+            if status != STATUS_LOST or reason != REASON_STUCK:
+                status = STATUS_LOST
+                reason = REASON_STUCK
+                fails = 0
+        elif stuck >= 0:
+            ch[j, CH_STUCK] = 0.0
+        # the variance this sample would be weighted with: under-weighted while recovering; the
+        # gate tests it against the filter's honest S (P stays honest under the under-weighting)
+        g = _weight(ch, cfg, j, status)
+        r_eff = r_nom + hph * (1.0 / g - 1.0) if g < 1.0 else r_nom
+        rep[j, REP_R] = r_eff
         rep[j, REP_INNOV] = nu
-        rep[j, REP_S] = s
-        # the decision waits until every channel's innovation is known (consensus below)
-        value[j] = v
-        rep[j, REP_EVENT] = _PENDING
+        rep[j, REP_S] = hph + r_nom
         ch[j, CH_STATUS] = status
         ch[j, CH_REASON] = reason
         ch[j, CH_FAILS] = fails
+        if ch[j, CH_STUCK] != 0.0:
+            rep[j, REP_EVENT] = EVENT_REJECTED  # a frozen sensor is not used, whatever it says
+            continue
+        # the decision waits until every channel's innovation is known (consensus below)
+        value[j] = v
+        rep[j, REP_EVENT] = _PENDING
 
     for j in range(m):
         if rep[j, REP_EVENT] != _PENDING:
@@ -251,21 +434,43 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
         reason = int(ch[j, CH_REASON])
         mode = int(ch[j, CH_MODE])
         fails = int(ch[j, CH_FAILS])
-        ramps = cfg[j, CFG_RAMP_FACTOR] > 1.0 and cfg[j, CFG_RAMP_TIME] > 0.0
-        passed = mode == MODE_ON or not _fails_prior(rep, cfg, j)
-        if (not passed and status == STATUS_LOST and fails > 0 and cfg[j, CFG_REACQUIRE] > 0.0
-                and t - ch[j, CH_FAIL_T0] >= cfg[j, CFG_REACQUIRE]):
-            passed = True  # re-acquisition: it has disagreed for too long to be an outlier
+        gated = t - ch[j, CH_T0] >= cfg[j, CFG_STARTUP]  # the start-up phase is over
+        own = not _fails_prior(rep, cfg, j)
+        passed = mode == MODE_ON or not gated or own
+        if (not passed and status == STATUS_LOST and reason == REASON_GATE and fails > 0
+                and cfg[j, CFG_REACQUIRE] > 0.0 and t - ch[j, CH_FAIL_T0] >= cfg[j, CFG_REACQUIRE]
+                and not _witnessed(rep, cfg, value, j, m)):
+            passed = True  # re-acquisition: disagreeing too long for an outlier, and no witness against it
         if not passed and _agrees_with_another(rep, cfg, value, j, m):
             passed = True  # the sensors agree with each other, not with the prediction: the model is off
+        persists = False
+        if not passed and gated and fails > 0 and not _witnessed(rep, cfg, value, j, m):
+            # persistence: the previous sample failed the gate too, and by the same amount within the
+            # gate. An outlier is isolated; a deviation that persists is a change the model missed
+            # (or an offset that, with no other sensor of this state, nothing can tell from one)
+            d = rep[j, REP_INNOV] - ch[j, CH_PREV_NU]
+            if cfg[j, CFG_ANGLE] != 0.0:
+                d = wrap_angle(d)
+            if d * d <= cfg[j, CFG_GATE] * (rep[j, REP_S] + ch[j, CH_PREV_S]):
+                passed = True
+                persists = True
+                # the prediction is what was wrong: its covariance was too small (fading memory)
+                rep[j, REP_S] = _inflate(P, H, cfg, j, rep[j, REP_INNOV], rep[j, REP_S])
         if passed:
+            if persists and status == STATUS_RECOVERING:
+                # the widened variance makes the under-weighting relative to it: keep the weight
+                rep[j, REP_R] = cfg[j, CFG_R] + (rep[j, REP_S] - cfg[j, CFG_R]) * (
+                    max(cfg[j, CFG_RAMP_N] - ch[j, CH_RAMP_K], 1.0) - 1.0)
             if status == STATUS_LOST:
-                if ramps:
+                if cfg[j, CFG_RAMP_N] >= 1.0:
                     status = STATUS_RECOVERING
                     ch[j, CH_RAMP_T0] = t
+                    ch[j, CH_RAMP_K] = 0.0
                 else:
                     status = STATUS_OK
                 reason = REASON_NONE
+            if status == STATUS_RECOVERING:
+                ch[j, CH_RAMP_K] += 1.0
             fails = 0
             rep[j, REP_EVENT] = EVENT_USED
             n_accept += 1
@@ -273,6 +478,8 @@ def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
             if fails == 0:
                 ch[j, CH_FAIL_T0] = t
             fails += 1
+            ch[j, CH_PREV_NU] = rep[j, REP_INNOV]
+            ch[j, CH_PREV_S] = rep[j, REP_S]
             if status != STATUS_LOST and fails >= cfg[j, CFG_LOSE_AFTER]:
                 status = STATUS_LOST
                 reason = REASON_GATE

@@ -12,7 +12,7 @@ Recursion (Sandøy 2016, sec. 5.1; Brown & Hwang 2012, ch. 4), at sample k:
 all samples of a step equals the same update done one channel at a time (Bierman 1977, ch. II;
 Brown & Hwang 2012, sec. 4.3) -- exact in exact arithmetic, and checked against filterpy's
 stacked update to 1e-9 in the tests. Scalar updates need no matrix inverse (one division per
-channel), make gating, drop-out and the transitional variance per channel natural (a channel is
+channel), make gating, drop-out and the recovery weighting per channel natural (a channel is
 simply skipped or weighted), and cost O(n^2) per channel. Each scalar update is the **Joseph
 form** P+ = (I - k h^T) P (I - k h^T)^T + r k k^T, evaluated as two rank-one products
 (M = P - k (P h)^T, then P+ = M + (r k - M h) k^T), which keeps P positive semi-definite even
@@ -72,7 +72,7 @@ from numba import njit
 from numpy.lib.stride_tricks import as_strided
 
 from rovlab.estimation.fusion import (
-    CFG_ANGLE, CFG_STATE, CH_MODE, CH_REASON, CH_STATUS, EVENT_NAMES, MODE_AUTO, MODE_NAMES, MODE_OFF, MODE_ON, N_CFG,
+    CFG_ANGLE, CFG_R, CFG_STATE, CH_MODE, CH_REASON, CH_STATUS, EVENT_NAMES, MODE_AUTO, MODE_NAMES, MODE_OFF, MODE_ON, N_CFG,
     N_CH, N_REP, REP_EVENT, REP_INNOV, REP_R, REP_S, STATUS_LOST, STATUS_NAMES, manage_channels,
     new_channel_state, status_label, wrap_angle,
 )
@@ -215,8 +215,12 @@ def predict_arrays(x, P, Delta, Q, wrap, sp, u, work):
 
 
 @njit(cache=True, inline="always")
-def _update_row(x, P, H, j, idx, value, r, angle, wrap, work):
-    """Joseph update with the scalar measurement value = H[j] x + v, v ~ N(0, r)."""
+def _update_row(x, P, H, j, idx, value, r_gain, r, angle, wrap, work):
+    """Joseph update with the scalar measurement value = H[j] x + v, v ~ N(0, r).
+
+    The gain is computed with r_gain >= r (under-weighting a returning sensor; r_gain = r is
+    the Kalman gain); the covariance with the true r, which the Joseph form allows for any gain.
+    """
     n = x.shape[0]
     op = n * n + n
     ok = op + n
@@ -238,7 +242,7 @@ def _update_row(x, P, H, j, idx, value, r, angle, wrap, work):
         hp = 0.0
         for i in range(n):
             hp += H[j, i] * work[op + i]
-    s = hp + r
+    s = hp + r_gain
     nu = value - hx
     if angle:
         nu = wrap_angle(nu)
@@ -280,7 +284,7 @@ def kf_update_scalar(x, P, h, value, r, angle, wrap, work):
             idx = i
     if not (nz == 1 and h[idx] == 1.0):
         idx = -1
-    _update_row(x, P, H, 0, idx, value, r, angle, wrap, work)
+    _update_row(x, P, H, 0, idx, value, r, r, angle, wrap, work)
 
 
 @njit(cache=True, inline="always")
@@ -295,8 +299,8 @@ def correct_arrays(x, P, ch, H, cfg, wrap, t, y, present, rep, work):
         for j in range(m):
             v = work[ov + j]
             if not math.isnan(v):
-                _update_row(x, P, H, j, int(cfg[j, CFG_STATE]), v, rep[j, REP_R], cfg[j, CFG_ANGLE] != 0.0,
-                            wrap, work)
+                _update_row(x, P, H, j, int(cfg[j, CFG_STATE]), v, rep[j, REP_R], cfg[j, CFG_R],
+                            cfg[j, CFG_ANGLE] != 0.0, wrap, work)
     return used
 
 

@@ -11,7 +11,8 @@ cannot estimate.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import null_space, qr
@@ -26,11 +27,15 @@ from rovlab.params.vehicle import SENSOR_CHANNELS, Vehicle
 STATES = OBSERVER_STATES
 
 
-def _chi2_ppf_1dof(p: float) -> float:
-    """Quantile of the chi-square distribution with 1 degree of freedom (= scipy.stats.chi2.ppf)."""
-    return float(2.0 * gammaincinv(0.5, p))
+def _chi2_ppf(p: float, dof: int) -> float:
+    """Quantile of the chi-square distribution (= scipy.stats.chi2.ppf(p, dof))."""
+    return float(2.0 * gammaincinv(0.5 * dof, p))
+
 _STATE_OF_QUANTITY = {"z": 0, "psi": 1, "w": 2, "r": 3}
 _TIMEOUT_PERIODS = 5.0  # default timeout: this many sample periods of the sensor
+_MIN_STUCK_SAMPLES = 5  # the variance check needs a few samples per block
+_STARTUP_TOLERANCE = 0.01  # P has converged when every variance is within 1 % of its steady state
+_STARTUP_TIME_CONSTANTS = 5.0  # then this many time constants of the error dynamics
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,8 +55,11 @@ class Channel:
     gate_threshold: float  # chi-square (1 dof) bound on nu^2 / S; inf = no gate
     lose_after: int
     recovery_time_s: float
-    recovery_variance_factor: float
+    recovery_samples: int  # N: samples over which a returning sensor's correction is spread (0: abrupt)
     reacquire_after_s: float
+    startup_s: float  # no gate this long after the first sample
+    stuck_samples: int  # samples per block of the variance (stuck) check; 0 = off
+    stuck_bound: float  # lower chi-square quantile (stuck_samples - 1 dof) of the block scatter / R
 
     @property
     def angle(self) -> bool:
@@ -93,8 +101,8 @@ class FilterModel:
         """The m x N_CFG array the compiled kernels read (see rovlab.estimation.fusion)."""
         # imported here: fusion imports numba, which ``rovlab design`` does not need
         from rovlab.estimation.fusion import (
-            CFG_ANGLE, CFG_GATE, CFG_LOSE_AFTER, CFG_OFFSET, CFG_R, CFG_RAMP_FACTOR, CFG_RAMP_TIME,
-            CFG_REACQUIRE, CFG_STATE, CFG_TIMEOUT, N_CFG,
+            CFG_ANGLE, CFG_GATE, CFG_LOSE_AFTER, CFG_OFFSET, CFG_R, CFG_RAMP_N, CFG_RAMP_TIME, CFG_REACQUIRE,
+            CFG_STARTUP, CFG_STATE, CFG_STUCK_BOUND, CFG_STUCK_N, CFG_TIMEOUT, N_CFG,
         )
 
         cfg = np.zeros((len(self.channels), N_CFG))
@@ -105,9 +113,12 @@ class FilterModel:
             cfg[j, CFG_GATE] = c.gate_threshold
             cfg[j, CFG_LOSE_AFTER] = c.lose_after
             cfg[j, CFG_RAMP_TIME] = c.recovery_time_s
-            cfg[j, CFG_RAMP_FACTOR] = c.recovery_variance_factor
+            cfg[j, CFG_RAMP_N] = c.recovery_samples
             cfg[j, CFG_ANGLE] = 1.0 if c.angle else 0.0
             cfg[j, CFG_REACQUIRE] = c.reacquire_after_s
+            cfg[j, CFG_STARTUP] = c.startup_s
+            cfg[j, CFG_STUCK_N] = c.stuck_samples
+            cfg[j, CFG_STUCK_BOUND] = c.stuck_bound
             row = self.H[j]
             unit = np.count_nonzero(row) == 1 and row[c.state_index] == 1.0
             cfg[j, CFG_STATE] = c.state_index if unit else -1
@@ -177,12 +188,58 @@ def observability(A: np.ndarray, H: np.ndarray, names: tuple[str, ...] = STATES
 
 
 # --------------------------------------------------------------------------------------------
+# Start-up phase
+# --------------------------------------------------------------------------------------------
+
+def startup_time(Phi: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, P0: np.ndarray, h: float, *,
+                 tolerance: float = _STARTUP_TOLERANCE, time_constants: float = _STARTUP_TIME_CONSTANTS,
+                 max_steps: int = 100_000) -> float:
+    """How long the innovation gate should wait after the start [s].
+
+    The gate tests innovations against the filter's own S = h P h^T + R, which is only right
+    once P has left its (arbitrary) initial value P0 and the initial estimation error has decayed
+    -- P0 = 0 in the thesis design claims a perfect start. With every channel sampled each step,
+    the Riccati recursion from P0 converges to the steady-state prior covariance P_inf, and the
+    error of the steady-state filter decays as the eigenvalues of Phi (I - K_inf H) (Anderson &
+    Moore 1979, Optimal Filtering, ch. 4: exponential forgetting of the initial condition). The
+    start-up phase is the number of steps until every diagonal entry of P is within ``tolerance``
+    of P_inf, plus ``time_constants`` time constants of the slowest error mode.
+    """
+    n = Phi.shape[0]
+    I = np.eye(n)
+    P = np.array(P0, dtype=float)
+    history = []
+    for _ in range(max_steps):
+        S = H @ P @ H.T + R
+        K = np.linalg.solve(S, H @ P).T
+        IKH = I - K @ H
+        P = Phi @ (IKH @ P @ IKH.T + K @ R @ K.T) @ Phi.T + Q
+        P = 0.5 * (P + P.T)
+        history.append(np.diag(P).copy())
+        if len(history) > 2 and np.allclose(history[-1], history[-2], rtol=1e-12, atol=0.0):
+            break
+    final = history[-1]
+    k_conv = 0
+    for k in range(len(history) - 1, -1, -1):
+        if np.any(np.abs(history[k] - final) > tolerance * np.abs(final)):
+            k_conv = k + 1
+            break
+    S = H @ P @ H.T + R
+    K = np.linalg.solve(S, H @ P).T
+    rho = float(np.max(np.abs(np.linalg.eigvals(Phi @ (I - K @ H)))))
+    tau = -h / math.log(rho) if 0.0 < rho < 1.0 else 0.0
+    return float((k_conv + 1) * h + time_constants * tau)
+
+
+# --------------------------------------------------------------------------------------------
 # Assembly
 # --------------------------------------------------------------------------------------------
 
 def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observable: bool = True
                        ) -> FilterModel:
     """Assemble Phi, Delta, Gamma, Q, H, R and the channels; raise ConfigError on any problem."""
+    from rovlab.estimation.fusion import STUCK_FALSE_ALARM  # here: fusion imports numba (design needs none)
+
     file = config.file or config.name
     params = HeaveYawParams.from_values(**config.model_values(vehicle))
     if not (params.M_w > 0 and params.M_r > 0):
@@ -222,6 +279,14 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
             continue
         f = mc.fusion
         timeout = f.timeout_s if f.timeout_s is not None else _TIMEOUT_PERIODS / sensor.rate_hz
+        rate = min(sensor.rate_hz, 1.0 / config.sample_time)  # samples the filter can see per second
+        n_ramp = max(1, int(round(f.recovery_time_s * rate))) if f.recovery_time_s > 0 else 0
+        n_stuck = int(round(f.stuck_window_s * rate)) if f.stuck_window_s > 0 else 0
+        if 0 < n_stuck < _MIN_STUCK_SAMPLES:
+            problems.append(Problem(file, f"{mc.key}.stuck_window_s", f.stuck_window_s,
+                                    f"a window of at least {_MIN_STUCK_SAMPLES} samples of {sensor.name} "
+                                    f"({_MIN_STUCK_SAMPLES / rate:g} s at {rate:g} Hz), or 0 to switch the check off"))
+            continue
         # Lever arm (SPEC section 5): p_VO = p_m - R(Theta) l; with phi = theta = 0 the depth
         # moves by l_z only, and w, r and psi need no correction.
         offset = float(sensor.position[2]) if mc.quantity == "z" else 0.0
@@ -229,9 +294,10 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
             name=name, column=f"{mc.quantity}_{sensor.name}", sensor=sensor.name, kind=sensor.kind,
             quantity=mc.quantity, state_index=_STATE_OF_QUANTITY[mc.quantity], offset=offset,
             variance=float(variance), timeout_s=float(timeout), gate_probability=f.gate_probability,
-            gate_threshold=_chi2_ppf_1dof(f.gate_probability) if f.gate_probability < 1.0 else np.inf,
-            lose_after=f.gate_failures_to_lose, recovery_time_s=f.recovery_time_s,
-            recovery_variance_factor=f.recovery_variance_factor, reacquire_after_s=f.reacquire_after_s,
+            gate_threshold=_chi2_ppf(f.gate_probability, 1) if f.gate_probability < 1.0 else np.inf,
+            lose_after=f.gate_failures_to_lose, recovery_time_s=f.recovery_time_s, recovery_samples=n_ramp,
+            reacquire_after_s=f.reacquire_after_s, startup_s=math.nan if f.startup_s is None else f.startup_s,
+            stuck_samples=n_stuck, stuck_bound=_chi2_ppf(STUCK_FALSE_ALARM, n_stuck - 1) if n_stuck else 0.0,
         ))
     if problems:
         raise ConfigError(problems, "filter configuration")
@@ -243,6 +309,19 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
     observable, touched, V = observability(A, H)
     if not observable and require_observable:
         raise ConfigError([unobservable_problem(file, channels, touched, V)], "filter configuration")
+    # The gate is only valid once the filter has converged: a shorter start-up phase than the
+    # design needs lets it discard healthy sensors while the filter is the one that is wrong (with
+    # the thesis's P0 = 0 and startup_s = 0 the closed loop lost both depth sensors and diverged).
+    auto = startup_time(disc.Phi, disc.Q, H, R, config.P0, config.sample_time) if observable else 0.0
+    for c, mc in zip(channels, config.measurements):
+        if not math.isnan(c.startup_s) and c.startup_s < auto and np.isfinite(c.gate_threshold):
+            problems.append(Problem(file, f"fusion.startup_s ({mc.key})", c.startup_s,
+                                    f"at least {auto:.3g} s for {c.name}: the start-up phase this design needs "
+                                    "before its innovation gate is valid (P converged from P0 plus 5 time constants "
+                                    "of the error dynamics); leave it out to use that value"))
+    if problems:
+        raise ConfigError(problems, "filter configuration")
+    channels = [replace(c, startup_s=auto) if math.isnan(c.startup_s) else c for c in channels]
     return FilterModel(
         h=config.sample_time, params=params, T_w=T_w, T_r=T_r, A=A, B=B, E=E, W=W, Phi=disc.Phi,
         Delta=disc.Delta, Gamma=disc.Gamma, Q=disc.Q, channels=tuple(channels), H=H, R=R,

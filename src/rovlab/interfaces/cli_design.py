@@ -153,7 +153,9 @@ def _check_initial(config, model) -> None:
 
 
 def _cmd_filter(args: argparse.Namespace) -> int:
-    from rovlab.estimation.fusion import EVENT_NONFINITE, EVENT_REJECTED, EVENT_USED, STATUS_LOST, status_label
+    from rovlab.estimation.fusion import (
+        EVENT_NONFINITE, EVENT_REJECTED, EVENT_USED, REASON_NAMES, STATUS_LOST, STATUS_NAMES, status_label,
+    )
     from rovlab.estimation.kalman import DepthHeadingFilter, IntervalError, StreamingFilter
     from rovlab.interfaces.cli import UserError
     from rovlab.io.logs import ChunkWriter, LogStream
@@ -168,7 +170,9 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     runner = StreamingFilter(filt, max_gap_steps=args.max_gap_steps)
     m = len(columns)
     # status codes -> labels ('ok', 'lost-timeout', ...): code = 8 status + reason
-    labels = [status_label(c // 8, c % 8) if c // 8 < 4 and c % 8 < 5 else "?" for c in range(32)]
+    assert len(REASON_NAMES) <= 8
+    labels = [status_label(c // 8, c % 8) if c // 8 < len(STATUS_NAMES) and c % 8 < len(REASON_NAMES) else "?"
+              for c in range(8 * len(STATUS_NAMES))]
     names = ["time_s", *model.states, *(f"var_{s}" for s in model.states), *(f"status_{c}" for c in columns)]
     comments = [f"rovlab filter {args.log}: vehicle {vehicle.name}, configuration {config.name}, "
                 f"h = {model.h:g} s", "units: SI (m, rad, m/s, rad/s, N, N m); var_* are the variances"]

@@ -120,8 +120,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "position_m (or time_s, moment_nm, heading_rad for yaw). Reports gain k, pole a, "
                                     "added_mass = m - 1/k and linear_damping = -a/k, both SNAME-signed (negative).")
     p.add_argument("file")
-    p.add_argument("--mass", type=_positive, required=True, metavar="KG",
-                   help="rigid-body mass m (I_zz in kg m^2 for yaw)")
+    p.add_argument("--mass", type=_positive, metavar="KG",
+                   help="rigid-body mass m (I_zz in kg m^2 for yaw); default: the --vehicle's")
+    p.add_argument("--vehicle", metavar="NAME|FILE",
+                   help="hold this vehicle's quadratic and cubic damping of the DOF fixed in the fit (the added "
+                        "mass is then not biased by the nonlinear damping)")
     p.add_argument("--dof", choices=("surge", "sway", "heave", "yaw"),
                    help="DOF (for --update); default: yaw for a moment_nm/heading_rad log, surge otherwise")
     p.add_argument("--fit-bias", action="store_true",
@@ -495,7 +498,20 @@ def _cmd_step(args: argparse.Namespace) -> int:
         need = ("time_s, moment_nm, heading_rad" if args.dof == "yaw" else "time_s, force_n, position_m")
         raise _user_error(f"{args.file}: --dof {args.dof} needs the columns {need}, but the file has {have}; "
                           f"use --dof {'yaw' if yaw else 'surge, sway or heave'}")
-    fit = _run(args.file, lambda: step.fit_step_response(t, f, x, mass=args.mass, bias=args.fit_bias))
+    damping = None
+    if args.vehicle is not None:
+        from rovlab.params.vehicle import DOF4, load_vehicle
+
+        known = load_vehicle(args.vehicle)
+        i = DOF4.index(args.dof)
+        damping = (float(known.damping_quadratic[i]), float(known.damping_cubic[i]))
+        if args.mass is None:
+            args.mass = float(known.I_zz if args.dof == "yaw" else known.mass)
+    if args.mass is None:
+        raise _user_error("identify step: give --mass (the rigid-body mass, I_zz for yaw) or --vehicle NAME|FILE "
+                          "to take it from a vehicle file")
+    fit = _run(args.file, lambda: step.fit_step_response(t, f, x, mass=args.mass, bias=args.fit_bias,
+                                                         damping=damping))
     if fit.added_mass > 0:
         print(f"rovlab: note: the added mass comes out positive: --mass {args.mass:g} is more than the total "
               f"{'inertia' if yaw else 'mass'} 1/k = {1 / fit.gain:.4g} the test shows; --mass is the rigid-body "
@@ -513,12 +529,13 @@ def _cmd_step(args: argparse.Namespace) -> int:
 
         i = DOF4.index(args.dof)
         current = load_vehicle(_check_update_target(args.update))
-        if current.damping_quadratic[i] != 0 or current.damping_cubic[i] != 0:
+        if (current.damping_quadratic[i] != 0 or current.damping_cubic[i] != 0) and damping is None:
             print(f"rovlab: note: {args.update} also has quadratic/cubic {args.dof} damping; the step test's linear "
                   "damping is an equivalent linearisation that already contains them (use --added-mass-only to "
                   "keep the file's damping)", file=sys.stderr)
+    how = f" --vehicle {args.vehicle}" if damping is not None else ""
     updated = _update(args, edits, ["added_mass"] + (["damping"] if len(edits) > 1 else []),
-                      f"{args.dof}: rovlab identify step {Path(args.file).name} --mass {args.mass:g}")
+                      f"{args.dof}: rovlab identify step {Path(args.file).name} --mass {args.mass:g}{how}")
     data = fit.as_dict() | {"file": args.file, "dof": args.dof, "plot": png, "updated": updated}
     se = fit.stderr
     key, _ = step.DOF_KEYS[args.dof]
@@ -529,7 +546,10 @@ def _cmd_step(args: argparse.Namespace) -> int:
         f"  linear damping = -a/k = {_pm(fit.linear_damping, se['linear_damping'])} (SNAME)",
     ] + ([f"  force bias = {_pm(fit.bias, se['bias'])}"] if fit.bias_fitted else []) + [
         f"  fit {fit.fit_percent:.2f} %, RMS position residual {fit.rms:.3g} {'rad' if yaw else 'm'}",
-        "  note: a linear model; nonlinear damping makes these an equivalent linearisation at the test's speeds",
+        (f"  quadratic {fit.fixed_damping[0]:g} and cubic {fit.fixed_damping[1]:g} damping held fixed "
+         f"(from {args.vehicle})" if damping is not None else
+         "  note: a linear model; nonlinear damping makes these an equivalent linearisation at the test's speeds "
+         "(--vehicle holds known nonlinear damping fixed)"),
     ] + ([f"  figure: {png}"] if png else []))
     _emit(args, data, text)
     return 0
@@ -698,7 +718,8 @@ def _cmd_lab_step(args: argparse.Namespace) -> int:
                                             duration_s=args.duration_s, linear=args.linear,
                                             buoyancy_error_n=args.buoyancy_error))
     nxt = (f"rovlab identify step {args.out} --mass {data.truth['mass']:g} --dof {args.dof}"
-           + (" --fit-bias" if args.dof == "heave" else ""))
+           + (" --fit-bias" if args.dof == "heave" else "")
+           + ("" if args.linear else f" --vehicle {args.vehicle}"))  # known nonlinear damping held fixed
     return _lab_report(args, [(args.out, data)], nxt)
 
 

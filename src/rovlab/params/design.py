@@ -42,9 +42,15 @@ File format (every table is closed: unknown keys are errors; ``source`` is requi
     timeout_s = 0.5                        # lost when no finite sample for this long
     gate_probability = 0.9999              # chi-square (1 dof) innovation gate; 1.0 = no gate
     gate_failures_to_lose = 3              # consecutive gate failures that declare a sensor lost
-    recovery_time_s = 5.0                  # transitional-R ramp length after a sensor returns
-    recovery_variance_factor = 1e4         # R starts at factor * R_nominal, decays geometrically
+    startup_s = 2.5                        # no gate this long after the start (default: from the design)
+    recovery_time_s = 5.0                  # a returning sensor's correction is spread over this long
+                                           # (0 = abrupt return, as in the thesis)
     reacquire_after_s = 5.0                # re-admit a gate-lost sensor that disagrees this long
+                                           # (unless a redundant sensor confirms the prediction)
+    stuck_window_s = 1.0                   # variance check over blocks this long; 0 = off
+
+(The former ``recovery_variance_factor`` is refused: a returning sensor is now under-weighted
+relative to the filter's own prior variance, see rovlab.estimation.fusion.)
 
     [[measurements]]
     sensor = "qualisys"                    # a sensor name of the vehicle file, or kind = "..."
@@ -110,9 +116,10 @@ class FusionSettings:
     timeout_s: float | None = None  # None: 5 sample periods of the sensor's rate_hz
     gate_probability: float = 0.9999
     gate_failures_to_lose: int = 3
+    startup_s: float | None = None  # None: computed from the design (estimation.model.startup_time)
     recovery_time_s: float = 5.0
-    recovery_variance_factor: float = 1e4
     reacquire_after_s: float = 5.0
+    stuck_window_s: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -339,13 +346,22 @@ def _fusion_settings(t: TableReader, base: FusionSettings, col: Collector) -> Fu
         gate_probability=t.number("gate_probability", base.gate_probability, lo=0.5, hi=1.0,
                                   what="chi-square gate probability; 1.0 disables the gate"),
         gate_failures_to_lose=t.integer("gate_failures_to_lose", base.gate_failures_to_lose, lo=1),
+        startup_s=(t.number("startup_s", nonnegative=True, what="s without the gate after the start; "
+                            "0 = gate from the first sample") if t.has("startup_s") else base.startup_s),
         recovery_time_s=t.number("recovery_time_s", base.recovery_time_s, nonnegative=True,
-                                 what="0 = no transitional R"),
-        recovery_variance_factor=t.number("recovery_variance_factor", base.recovery_variance_factor,
-                                          lo=1.0),
+                                 what="s over which a returning sensor's correction is spread; 0 = abrupt return"),
         reacquire_after_s=t.number("reacquire_after_s", base.reacquire_after_s, nonnegative=True,
                                    what="0 = never re-admit a sensor the gate keeps rejecting"),
+        stuck_window_s=t.number("stuck_window_s", base.stuck_window_s, nonnegative=True,
+                                what="s per block of the stuck-sensor variance check; 0 = no check"),
     )
+    if t.has("recovery_variance_factor"):
+        # The old transitional R (factor * R decaying to R) did not spread the correction once the
+        # prior variance outgrew factor * R, and factor = 1 left a gate-lost sensor out for good
+        # (the closed loop diverged): refuse it rather than silently ignore it.
+        t.problem("recovery_variance_factor", t.raw("recovery_variance_factor"),
+                  "no such key any more: a returning sensor is now under-weighted relative to the filter's "
+                  "prior variance over recovery_time_s (0 = abrupt return); delete this key")
     if t.path == "fusion":
         t.finish()
     return settings

@@ -86,3 +86,166 @@ def consistency(values: np.ndarray, dof: int, *, probability: float = 0.95) -> d
         "mean_bounds": [avg_lo, avg_hi],
         "mean_inside": bool(avg_lo <= mean <= avg_hi),
     }
+
+
+# --------------------------------------------------------------------------------------------
+# Drop-outs, recovery and sensor-loss events (issue 10): pure functions of the time-series
+# columns (``time_s``, ``est_<state>``, ``true_<state>``, ``var_<state>``, ``tau_N``,
+# ``status_<quantity>_<sensor>`` with the numeric codes of rovlab.estimation.fusion.status_code)
+# --------------------------------------------------------------------------------------------
+
+_ANGLE_STATES = ("psi",)
+
+
+def dropout_windows(dropouts: Sequence[Any]) -> list[tuple[str, float, float]]:
+    """(sensor or 'sensor.quantity', start_s, end_s) from the scenario's drop-outs, given as
+    mappings {"sensor", "start_s", "end_s"} (SimResult.meta["dropouts"]) or as tuples."""
+    out = []
+    for d in dropouts:
+        if isinstance(d, dict):
+            out.append((str(d["sensor"]), float(d["start_s"]), float(d["end_s"])))
+        else:
+            sensor, start, end = d
+            out.append((str(sensor), float(start), float(end)))
+    return out
+
+
+def _error(columns: dict[str, np.ndarray], state: str) -> np.ndarray:
+    e = np.asarray(columns[f"est_{state}"], dtype=float) - np.asarray(columns[f"true_{state}"], dtype=float)
+    return wrap(e) if state in _ANGLE_STATES else e
+
+
+def _states(columns: dict[str, np.ndarray], wanted: Sequence[str]) -> list[str]:
+    return [s for s in wanted if f"est_{s}" in columns and f"true_{s}" in columns]
+
+
+def error_before_dropout(columns: dict[str, np.ndarray], start_s: float, *, settle_s: float = 10.0,
+                         states: Sequence[str] = ("z", "psi", "w", "r")) -> dict[str, Any]:
+    """RMS estimation error per state on [settle_s, start_s): before the drop-out, but after the
+    start-up transient (the bias estimates converging, the first reference step) has settled.
+
+    ``window_s`` in the result is the length of the window used (None values when it is empty,
+    e.g. a drop-out that starts before ``settle_s``)."""
+    t = np.asarray(columns["time_s"], dtype=float)
+    sel = (t >= settle_s) & (t < start_s)
+    out: dict[str, Any] = {"from_s": float(settle_s), "to_s": float(start_s),
+                           "window_s": float(max(0.0, start_s - settle_s)) if sel.any() else 0.0}
+    for s in _states(columns, states):
+        out[s] = float(rms(_error(columns, s)[sel])) if sel.any() else None
+    return out
+
+
+def drift_during_dropout(columns: dict[str, np.ndarray], start_s: float, end_s: float, *,
+                         states: Sequence[str] = ("z", "psi")) -> dict[str, Any]:
+    """Per state, over the rows with start_s <= t < end_s: the drift (error at the last row minus
+    error at the first), the largest |error| and the RMS error."""
+    t = np.asarray(columns["time_s"], dtype=float)
+    sel = np.flatnonzero((t >= start_s) & (t < end_s))
+    out: dict[str, Any] = {}
+    for s in _states(columns, states):
+        if sel.size == 0:
+            out[s] = {"drift": None, "max_abs_error": None, "rms_error": None}
+            continue
+        e = _error(columns, s)[sel]
+        drift = e[-1] - e[0]
+        out[s] = {"drift": float(wrap(drift) if s in _ANGLE_STATES else drift),
+                  "max_abs_error": float(np.max(np.abs(e))), "rms_error": float(rms(e))}
+    return out
+
+
+def recovery_kick(columns: dict[str, np.ndarray], return_s: float, *, window_s: float = 5.0) -> dict[str, Any]:
+    """What a sensor's return at ``return_s`` does to the estimate and the commands, over the rows
+    with return_s <= t < return_s + window_s:
+
+    * ``max_step_psi`` / ``max_step_r``: the largest one-step change |x_k - x_{k-1}| of psi_hat
+      (wrapped) and r_hat, the first step being the one into the first row after the return;
+    * ``peak_abs_tau_N``: the largest |tau_N|;
+    * ``psi_error_at_return``: psi_hat - psi at the last row before the return;
+    * ``psi_back_within_2sigma_s``: how long after the return psi_hat first comes within
+      2 sigma of the truth, sigma being the filter's smallest heading standard deviation in the
+      window (sqrt(var_psi) once the sensor is fully back: during the drop-out the filter's own
+      sigma grows to radians and would make the test empty); None if it never does in the
+      window or var_psi is not logged.
+    """
+    t = np.asarray(columns["time_s"], dtype=float)
+    rows = np.flatnonzero((t >= return_s) & (t < return_s + window_s))
+    out: dict[str, Any] = {"return_s": float(return_s), "window_s": float(window_s), "max_step_psi": None,
+                           "max_step_r": None, "peak_abs_tau_N": None, "psi_error_at_return": None,
+                           "psi_back_within_2sigma_s": None}
+    if rows.size == 0 or rows[0] == 0:
+        return out
+    prev = np.concatenate([[rows[0] - 1], rows])
+    if "est_psi" in columns:
+        out["max_step_psi"] = float(np.max(np.abs(wrap(np.diff(np.asarray(columns["est_psi"], float)[prev])))))
+    if "est_r" in columns:
+        out["max_step_r"] = float(np.max(np.abs(np.diff(np.asarray(columns["est_r"], float)[prev]))))
+    if "tau_N" in columns:
+        out["peak_abs_tau_N"] = float(np.max(np.abs(np.asarray(columns["tau_N"], float)[rows])))
+    if "true_psi" in columns and "est_psi" in columns:
+        e = _error(columns, "psi")
+        out["psi_error_at_return"] = float(e[rows[0] - 1])
+        if "var_psi" in columns:
+            sigma = float(np.sqrt(np.min(np.asarray(columns["var_psi"], float)[rows])))
+            inside = np.flatnonzero(np.abs(e[rows]) <= 2.0 * sigma)
+            if inside.size:
+                out["psi_back_within_2sigma_s"] = float(t[rows[inside[0]]] - return_s)
+    return out
+
+
+def _status_channel(column: str) -> tuple[str, str]:
+    """('qualisys', 'z') from 'status_z_qualisys'."""
+    quantity, _, sensor = column[len("status_"):].partition("_")
+    return sensor, quantity
+
+
+def sensor_loss_events(columns: dict[str, np.ndarray], *, dropouts: Sequence[Any] = ()) -> list[dict[str, Any]]:
+    """Every transition of a channel into a lost state, from the ``status_<quantity>_<sensor>``
+    columns (codes of rovlab.estimation.fusion.status_code; plain STATUS_* codes read as
+    'lost' with reason 'unknown').
+
+    Each event: ``channel`` (the column's suffix, e.g. 'z_qualisys'), ``t_s``, ``reason``
+    ('timeout', 'gate', 'nonfinite', 'stuck', 'manual' or 'unknown') and ``expected``: True
+    when the channel's sensor was in a scheduled drop-out window (start_s <= t <= end_s) -- a
+    loss the scenario asked for, not a false alarm.
+    """
+    from rovlab.estimation.fusion import code_label
+
+    t = np.asarray(columns["time_s"], dtype=float)
+    windows = dropout_windows(dropouts)
+    events = []
+    for name in sorted(k for k in columns if k.startswith("status_")):
+        codes = np.asarray(columns[name], dtype=float)
+        sensor, quantity = _status_channel(name)
+        labels = {c: code_label(c) for c in np.unique(codes[np.isfinite(codes)])}
+        lost = np.array([np.isfinite(c) and labels[c].startswith("lost") for c in codes], dtype=bool)
+        starts = np.flatnonzero(lost & ~np.concatenate([[False], lost[:-1]]))
+        for k in starts:
+            label = labels[codes[k]]
+            reason = label[len("lost-"):] if label.startswith("lost-") else "unknown"
+            expected = any(s in (sensor, f"{sensor}.{quantity}") and a <= t[k] <= b for s, a, b in windows)
+            events.append({"channel": name[len("status_"):], "t_s": float(t[k]), "reason": reason,
+                           "expected": bool(expected)})
+    events.sort(key=lambda e: (e["t_s"], e["channel"]))
+    return events
+
+
+def loss_event_counts(events: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Summary of :func:`sensor_loss_events`: total, unexpected (false alarms) and per reason."""
+    by_reason: dict[str, int] = {}
+    for e in events:
+        by_reason[e["reason"]] = by_reason.get(e["reason"], 0) + 1
+    return {"total": len(events), "unexpected": sum(1 for e in events if not e["expected"]),
+            "by_reason": dict(sorted(by_reason.items()))}
+
+
+def dropout_metrics(columns: dict[str, np.ndarray], dropouts: Sequence[Any], *, settle_s: float = 10.0,
+                    recovery_window_s: float = 5.0) -> list[dict[str, Any]]:
+    """One record per drop-out window: error before (after ``settle_s``), drift during, and the
+    recovery kick in ``recovery_window_s`` after the return (see the functions above)."""
+    out = []
+    for sensor, start, end in dropout_windows(dropouts):
+        out.append({"sensor": sensor, "start_s": start, "end_s": end,
+                    "before": error_before_dropout(columns, start, settle_s=settle_s),
+                    "during": drift_during_dropout(columns, start, end),
+                    "recovery": recovery_kick(columns, end, window_s=recovery_window_s)})
+    return out

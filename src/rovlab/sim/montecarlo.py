@@ -129,6 +129,16 @@ def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     nis = np.array([r["nis"] for r in runs], dtype=float)
     if nis.size:
         out["nis"] = mx.consistency(nis, 1)
+    losses = [r["metrics"].get("sensor_losses") for r in runs if r["metrics"].get("sensor_losses")]
+    if losses:  # false alarms: sensors declared lost outside the scenario's drop-out windows
+        reasons: dict[str, int] = {}
+        for x in losses:
+            for e in x["events"]:
+                if not e["expected"]:
+                    reasons[e["reason"]] = reasons.get(e["reason"], 0) + 1
+        out["sensor_losses"] = {"runs_with_false_alarms": sum(1 for x in losses if x["unexpected"]),
+                                "false_alarms": sum(x["unexpected"] for x in losses),
+                                "false_alarms_by_reason": dict(sorted(reasons.items()))}
     return out
 
 
@@ -142,6 +152,8 @@ def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
             out[key] = float(v)
         elif isinstance(v, (int, float)):
             out[key] = float(v)
+        elif k == "events":
+            continue  # per-event records (sensor losses) are summarised apart
         elif isinstance(v, list) and v and all(isinstance(x, Mapping) for x in v):
             for i, x in enumerate(v):
                 out.update(_flatten(x, f"{key}[{i}]."))

@@ -367,6 +367,18 @@ class SimResult:
     meta: dict[str, Any]
     reason: np.ndarray | None = None  # (K, m) why each channel is lost/off (fusion REASON_*)
 
+    def status_codes(self) -> dict[str, np.ndarray]:
+        """status_<column> as one code per sample for status and reason
+        (rovlab.estimation.fusion.status_code: 4 lost-timeout ... 8 lost-stuck)."""
+        from rovlab.estimation.fusion import STATUS_LOST
+
+        out = {}
+        for j, name in enumerate(k for k in self.columns if k.startswith("status_")):
+            s = np.asarray(self.columns[name], dtype=float)
+            r = self.reason[:, j] if self.reason is not None else np.zeros(len(s))
+            out[name] = np.where((s == STATUS_LOST) & (r >= 1) & (r <= 5), 3 + r, s)
+        return out
+
     def status_words(self) -> dict[str, list[str]]:
         """status_<column> as words ('ok', 'recovering', 'lost-timeout', 'lost-gate', 'off' ...),
         the same words `rovlab filter` writes."""
@@ -457,28 +469,28 @@ def summarise(result: SimResult) -> dict[str, Any]:
             st = [s["settling_time_s"] for s in mine]
             out["settling_time_s"][axis] = None if any(v is None for v in st) else max(st)
             out["overshoot"][axis] = max(s["overshoot"] or 0.0 for s in mine)
-    # drop-outs: what dead reckoning costs
+    # drop-outs: what dead reckoning costs, measured honestly: the "before" window starts after
+    # the start-up has settled, the recovery is judged on psi_hat, r_hat and tau_N
+    coded = {**c, **result.status_codes()}
     drops = []
-    for d in sc.dropouts:
+    for d, rec in zip(sc.dropouts, mx.dropout_metrics(coded, result.meta["dropouts"])):
         w = (t >= d.start_s) & (t < d.end_s)
-        before = (t >= max(0.0, d.start_s - (d.end_s - d.start_s))) & (t < d.start_s)
-        after = (t >= d.end_s) & (t < d.end_s + 10.0)
         if not w.any():
             continue
         e_psi = err[:, 1]
         i0 = int(np.argmax(w))
         i1 = int(len(w) - 1 - np.argmax(w[::-1]))
         drops.append({
-            "sensor": d.sensor + (f".{d.channel}" if d.channel else ""), "start_s": d.start_s, "end_s": d.end_s,
+            **rec,
             "heading_drift_rad": float(e_psi[i1] - e_psi[i0]),
             "heading_error_max_rad": float(np.max(np.abs(e_psi[w]))),
-            "heading_error_rms_before": float(mx.rms(e_psi[before])) if before.any() else None,
-            "heading_error_rms_after_10s": float(mx.rms(e_psi[after])) if after.any() else None,
+            "heading_error_rms_before": rec["before"].get("psi"),
+            "depth_error_rms_before": rec["before"].get("z"),
             "depth_error_rms_during": float(mx.rms(err[w, 0])),
-            "depth_error_rms_before": float(mx.rms(err[before, 0])) if before.any() else None,
-            "heave_velocity_jump_on_return": float(np.max(np.abs(np.diff(c["est_w"][i1:i1 + 20])))) if i1 + 2 < len(t) else None,
         })
     out["dropouts"] = drops
+    events = mx.sensor_loss_events(coded, dropouts=result.meta["dropouts"])
+    out["sensor_losses"] = {**mx.loss_event_counts(events), "events": events}
     # consistency: NEES of the corrected estimate, NIS per used measurement
     out["nees"] = {"states": list(result.nees_states), **mx.consistency(result.nees, len(result.nees_states))}
     out["nis"] = mx.consistency(result.nis, 1)

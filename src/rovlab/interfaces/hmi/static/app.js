@@ -612,8 +612,9 @@
       { key: "fusion.timeout_s", label: "lost after no sample for", unit: "s", optional: true, placeholder: () => "5 samples" },
       { key: "fusion.gate_probability", label: "innovation gate probability", unit: "", optional: true, placeholder: () => "0.9999" },
       { key: "fusion.gate_failures_to_lose", label: "gate failures to lose", unit: "", optional: true, placeholder: () => "3" },
-      { key: "fusion.recovery_time_s", label: "transitional R ramp", unit: "s", optional: true, placeholder: () => "5" },
-      { key: "fusion.recovery_variance_factor", label: "R factor at return", unit: "", optional: true, placeholder: () => "1e4" },
+      { key: "fusion.startup_s", label: "no gate after the start for", unit: "s", optional: true, placeholder: () => "from the design" },
+      { key: "fusion.recovery_time_s", label: "spread a returning sensor's correction over", unit: "s", optional: true, placeholder: () => "5" },
+      { key: "fusion.stuck_window_s", label: "stuck-sensor check window", unit: "s", optional: true, placeholder: () => "1" },
       { key: "fusion.reacquire_after_s", label: "re-admit a disagreeing sensor after", unit: "s", optional: true, placeholder: () => "5" },
     ]);
   }
