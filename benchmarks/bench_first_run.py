@@ -30,15 +30,18 @@ REPEAT = 3
 
 def timed(argv: list[str], env: dict, cwd: str) -> tuple[float, float]:
     """(wall seconds, peak RSS MiB) of one whole process."""
+    # peak memory by /usr/bin/time where there is one (a child's ru_maxrss also counts the parent's
+    # memory it was forked from, before its exec)
+    timer = ["/usr/bin/time", "-f", "%M"] if os.path.exists("/usr/bin/time") else []
     t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, env=env, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(timer + argv, env=env, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     dt = time.perf_counter() - t0
     err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:
         raise SystemExit(f"{' '.join(argv)} failed ({proc.returncode}):\n{err}")
-    return dt, usage.ru_maxrss / 1024.0
+    return dt, (float(err.strip().splitlines()[-1]) / 1024.0 if timer else usage.ru_maxrss / 1024.0)
 
 
 def cold(argv: list[str], work: str, repeat: int = REPEAT) -> list[tuple[float, float]]:
