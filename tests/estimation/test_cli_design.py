@@ -150,3 +150,16 @@ def test_filter_keeps_epoch_time_stamps(capsys, tmp_path):
     assert code == 0, err
     est = read_log(tmp_path / "est.csv")  # strictly increasing times, or this read would fail
     np.testing.assert_array_equal(est.time, cols["time_s"])
+
+
+def test_design_text_names_the_bias_time_constants_and_prints_gamma_and_h(capsys):
+    # issue 15 item 6: T_w, T_r are the bias model's, not the vehicle's; Gamma and H were missing
+    code, out, _ = run(capsys, "design", "--config", "thesis")
+    assert code == 0
+    assert "bias model (Gauss-Markov): time constants T_w = 1844 s (b_w), T_r = 26 s (b_r)" in out
+    assert "heave M_w/-Z_w = 3.55985 s" in out and "yaw M_r/-N_r = 3.90625 s" in out
+    for name in ("Phi", "Delta", "Gamma", "Q", "H", "R"):
+        assert f"  {name} =\n" in out, name
+    assert "deg" not in out and "psi [rad]" in out and "rad^2" in out
+    h = out.split("  H =\n")[1].splitlines()[:3]
+    assert h == ["    [ 1   0   0   0   0   0]", "    [ 1   0   0   0   0   0]", "    [ 0   1   0   0   0   0]"]

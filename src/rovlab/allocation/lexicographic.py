@@ -41,7 +41,6 @@ returns limits-respecting, non-bending forces):
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 _FREE, _INEQ, _FIXED = 0, 1, 2  # kinds of working-matrix row
 _NULL_TOL = 1e-6  # residual norm below which a projector column is taken as dependent
@@ -50,7 +49,6 @@ _DUAL_TOL = 1e-11  # multiplier size treated as zero (optimality)
 _DEGENERATE_BEFORE_BLAND = 8
 
 
-@njit(cache=True)
 def null_basis(B: np.ndarray, T: np.ndarray, s: np.ndarray, redistribute: bool) -> np.ndarray:
     """N (n x q): W^-1/2 times an orthonormal basis of null(B W^-1/2), s = W^-1/2 diagonal.
 
@@ -103,7 +101,6 @@ def null_basis(B: np.ndarray, T: np.ndarray, s: np.ndarray, redistribute: bool) 
     return N
 
 
-@njit(cache=True)
 def _pivot(Ainv: np.ndarray, row: np.ndarray, j: int) -> None:
     """Replace row j of the working matrix A by ``row``, updating A^-1 in place (A' = A with
     row j replaced; requires row . A^-1 e_j != 0)."""
@@ -123,7 +120,6 @@ def _pivot(Ainv: np.ndarray, row: np.ndarray, j: int) -> None:
                 Ainv[r, k] -= v[k] * Ainv[r, j]
 
 
-@njit(cache=True)
 def _lp_stage(G: np.ndarray, h: np.ndarray, gnorm: np.ndarray, m: int, y: np.ndarray, Ainv: np.ndarray,
               ci: np.ndarray, kind: np.ndarray, obj: int, max_iter: int) -> int:
     """Maximise y[obj] over G[:m] y <= h[:m] from the feasible y, with the working matrix given
@@ -189,7 +185,6 @@ def _lp_stage(G: np.ndarray, h: np.ndarray, gnorm: np.ndarray, m: int, y: np.nda
     return it
 
 
-@njit(cache=True)
 def _fix_coordinate(G: np.ndarray, m: int, k: int, Ainv: np.ndarray, ci: np.ndarray, kind: np.ndarray) -> None:
     """Hold y[k] at its current value from now on: make an equality row of the working matrix
     that pins it (the coordinate row e_k, or a bound of y[k] already in the working set)."""
@@ -209,7 +204,6 @@ def _fix_coordinate(G: np.ndarray, m: int, k: int, Ainv: np.ndarray, ci: np.ndar
     kind[jb] = _FIXED
 
 
-@njit(cache=True)
 def _is_bound_of(G: np.ndarray, i: int, k: int) -> bool:
     """Row i of G is a multiple of e_k (it bounds coordinate k alone)."""
     if G[i, k] == 0.0:
@@ -220,7 +214,6 @@ def _is_bound_of(G: np.ndarray, i: int, k: int) -> bool:
     return True
 
 
-@njit(cache=True)
 def _solve_small(M: np.ndarray, b: np.ndarray) -> np.ndarray:
     """M x = b by Gaussian elimination with partial pivoting (M is k x k, k tiny)."""
     k = b.shape[0]
@@ -248,7 +241,6 @@ def _solve_small(M: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x
 
 
-@njit(cache=True)
 def least_distance(Gz: np.ndarray, hz: np.ndarray, z: np.ndarray, max_iter: int) -> int:
     """min |z|^2 subject to Gz z <= hz from a feasible z (updated in place): the primal active-set
     method (Nocedal & Wright 2006, Algorithm 16.3) with an empty initial working set. The step
@@ -360,7 +352,6 @@ def least_distance(Gz: np.ndarray, hz: np.ndarray, z: np.ndarray, max_iter: int)
     return it
 
 
-@njit(cache=True)
 def lexicographic_allocate(B: np.ndarray, T: np.ndarray, s: np.ndarray, f_min: np.ndarray, f_max: np.ndarray,
                            tau: np.ndarray, level: np.ndarray, n_levels: int, redistribute: bool):
     """(f, fraction per DOF): the lexicographic optimum described in the module docstring.

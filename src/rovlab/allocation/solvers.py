@@ -20,15 +20,18 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import LazyKernels
+from rovlab.allocation import kernels as _plain
 from rovlab.allocation.geometry import configuration_matrix
-from rovlab.allocation.lexicographic import lexicographic_allocate
-from rovlab.models.thrusters import ThrusterBank, bank_pwm
+from rovlab.models import thruster_kernels as _plain_thrusters
+from rovlab.models import thrusters as _thrusters
+from rovlab.models.thrusters import ThrusterBank
 from rovlab.params.vehicle import WRENCH6, Vehicle
 
 DEFAULT_PRIORITY: tuple[tuple[str, ...], ...] = (("K", "M"), ("Z",), ("N",), ("X", "Y"))
 SCALE_ALL: tuple[tuple[str, ...], ...] = (WRENCH6,)
+_TOL = _plain._TOL
 
 
 def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
@@ -41,21 +44,8 @@ def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarra
     return s[:, None] * np.linalg.pinv(B * s[None, :])
 
 
-@njit(cache=True)
-def allocate_kernel(B: np.ndarray, T: np.ndarray, s: np.ndarray, f_min: np.ndarray, f_max: np.ndarray,
-                    tau: np.ndarray, level: np.ndarray, n_levels: int, redistribute: bool):
-    """Prioritised, direction-preserving allocation. Returns (f, fraction per DOF).
-
-    ``level[j]`` is the priority level of DOF j (0 = highest); ``s`` = W^-1/2 (T is the
-    weighted pseudo-inverse built with it). Each level is scaled along its own direction by the
-    largest fraction possible once the levels above hold theirs (the exact lexicographic
-    optimum, found by small LP stages), DOFs demanded zero stay zero, and the forces are the
-    least-effort ones giving that wrench; a feasible demand is met exactly. With one level this
-    is the largest direction-preserving scaling of the whole wrench. ``redistribute=False``
-    keeps the forces in the pseudo-inverse's range (no null-space use on redundant vehicles).
-    See rovlab.allocation.lexicographic.
-    """
-    return lexicographic_allocate(B, T, s, f_min, f_max, tau, level, n_levels, redistribute)
+_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True)
+__getattr__ = _kernels.module_getattr(__name__)  # allocate_kernel, matvec: numba dispatchers (on first use)
 
 
 @dataclass(frozen=True)
@@ -94,10 +84,12 @@ class Allocator:
     plain unconstrained pseudo-inverse: the forces are T tau as they are, possibly beyond the
     thrusters' limits (listed in ``over_limit``; their PWM commands saturate, so the real
     wrench then differs from ``achieved``, which is what the unconstrained forces would give).
+    ``compiled=False`` runs the kernels as plain Python: the same numbers, slower per call, but
+    without importing numba or compiling (for a one-off allocation such as ``rovlab allocate``).
     """
 
     def __init__(self, vehicle: Vehicle, *, priority: Sequence[Sequence[str]] = DEFAULT_PRIORITY,
-                 weights: np.ndarray | None = None, saturation: bool = True) -> None:
+                 weights: np.ndarray | None = None, saturation: bool = True, compiled: bool = True) -> None:
         self.vehicle = vehicle
         self.B = np.ascontiguousarray(configuration_matrix(vehicle))
         self.T = np.ascontiguousarray(weighted_pinv(self.B, weights))
@@ -109,6 +101,16 @@ class Allocator:
         self.level = _levels(priority)
         self.n_levels = int(self.level.max()) + 1
         self.rank = int(np.linalg.matrix_rank(self.B))
+        self.compiled = compiled
+        self._kernels: tuple | None = None  # (allocate_kernel, bank_pwm), resolved on first use
+
+    def _resolve(self) -> tuple:
+        if self._kernels is None:
+            if self.compiled:
+                self._kernels = (_kernels.compiled()["allocate_kernel"], _thrusters.bank_pwm)
+            else:
+                self._kernels = (_plain.allocate_kernel, _plain_thrusters.bank_pwm)
+        return self._kernels
 
     @property
     def f_min(self) -> np.ndarray:
@@ -122,13 +124,14 @@ class Allocator:
         """(thruster forces, fraction per DOF) for a 6-DOF wrench (no validation)."""
         if not self.saturation:
             return self.T @ tau6, np.ones(6)
-        return allocate_kernel(self.B, self.T, self._s, self.bank.f_min, self.bank.f_max, tau6,
-                               self.level, self.n_levels, True)
+        kernel = (self._kernels or self._resolve())[0]
+        return kernel(self.B, self.T, self._s, self.bank.f_min, self.bank.f_max, tau6, self.level, self.n_levels, True)
 
     def allocate(self, tau: np.ndarray) -> AllocationResult:
         """Allocate a 6-DOF wrench [X, Y, Z, K, M, N] or a 4-DOF one [X, Y, Z, N] (K = M = 0)."""
         tau6 = as_wrench6(tau)
         f, frac = self.forces(tau6)
+        bank_pwm = (self._kernels or self._resolve())[1]
         pwm = bank_pwm(self.bank.rows, self.bank.grid_pwm, self.bank.grid_force, f)
         achieved = self.B @ f
         if not self.saturation:

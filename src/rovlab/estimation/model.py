@@ -16,19 +16,21 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import null_space, qr
-from scipy.stats import chi2
+from scipy.special import gammaincinv  # not scipy.stats: its import alone takes ~0.7 s
 
 from rovlab.models.discretise import discretise
-from rovlab.estimation.fusion import (
-    CFG_ANGLE, CFG_GATE, CFG_LOSE_AFTER, CFG_OFFSET, CFG_R, CFG_RAMP_N, CFG_RAMP_TIME, CFG_REACQUIRE,
-    CFG_STARTUP, CFG_STATE, CFG_STUCK_BOUND, CFG_STUCK_N, CFG_TIMEOUT, N_CFG, STUCK_FALSE_ALARM,
-)
 from rovlab.models.linear import HeaveYawParams, observer_model
 from rovlab.params.design import INPUTS, OBSERVER_STATES, DesignConfig
 from rovlab.params.validate import ConfigError, Problem
 from rovlab.params.vehicle import SENSOR_CHANNELS, Vehicle
 
 STATES = OBSERVER_STATES
+
+
+def _chi2_ppf(p: float, dof: int) -> float:
+    """Quantile of the chi-square distribution (= scipy.stats.chi2.ppf(p, dof))."""
+    return float(2.0 * gammaincinv(0.5 * dof, p))
+
 _STATE_OF_QUANTITY = {"z": 0, "psi": 1, "w": 2, "r": 3}
 _TIMEOUT_PERIODS = 5.0  # default timeout: this many sample periods of the sensor
 _MIN_STUCK_SAMPLES = 5  # the variance check needs a few samples per block
@@ -97,6 +99,12 @@ class FilterModel:
 
     def channel_config(self) -> np.ndarray:
         """The m x N_CFG array the compiled kernels read (see rovlab.estimation.fusion)."""
+        # imported here: fusion imports numba, which ``rovlab design`` does not need
+        from rovlab.estimation.fusion import (
+            CFG_ANGLE, CFG_GATE, CFG_LOSE_AFTER, CFG_OFFSET, CFG_R, CFG_RAMP_N, CFG_RAMP_TIME, CFG_REACQUIRE,
+            CFG_STARTUP, CFG_STATE, CFG_STUCK_BOUND, CFG_STUCK_N, CFG_TIMEOUT, N_CFG,
+        )
+
         cfg = np.zeros((len(self.channels), N_CFG))
         for j, c in enumerate(self.channels):
             cfg[j, CFG_OFFSET] = c.offset
@@ -230,6 +238,8 @@ def startup_time(Phi: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, P
 def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observable: bool = True
                        ) -> FilterModel:
     """Assemble Phi, Delta, Gamma, Q, H, R and the channels; raise ConfigError on any problem."""
+    from rovlab.estimation.fusion import STUCK_FALSE_ALARM  # here: fusion imports numba (design needs none)
+
     file = config.file or config.name
     params = HeaveYawParams.from_values(**config.model_values(vehicle))
     if not (params.M_w > 0 and params.M_r > 0):
@@ -284,10 +294,10 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
             name=name, column=f"{mc.quantity}_{sensor.name}", sensor=sensor.name, kind=sensor.kind,
             quantity=mc.quantity, state_index=_STATE_OF_QUANTITY[mc.quantity], offset=offset,
             variance=float(variance), timeout_s=float(timeout), gate_probability=f.gate_probability,
-            gate_threshold=float(chi2.ppf(f.gate_probability, 1)) if f.gate_probability < 1.0 else np.inf,
+            gate_threshold=_chi2_ppf(f.gate_probability, 1) if f.gate_probability < 1.0 else np.inf,
             lose_after=f.gate_failures_to_lose, recovery_time_s=f.recovery_time_s, recovery_samples=n_ramp,
             reacquire_after_s=f.reacquire_after_s, startup_s=math.nan if f.startup_s is None else f.startup_s,
-            stuck_samples=n_stuck, stuck_bound=float(chi2.ppf(STUCK_FALSE_ALARM, n_stuck - 1)) if n_stuck else 0.0,
+            stuck_samples=n_stuck, stuck_bound=_chi2_ppf(STUCK_FALSE_ALARM, n_stuck - 1) if n_stuck else 0.0,
         ))
     if problems:
         raise ConfigError(problems, "filter configuration")

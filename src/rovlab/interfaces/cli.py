@@ -19,26 +19,55 @@ _COMMAND_MODULES = (
 )
 
 
+# Which module provides each sub-command, so that a command imports only its own module (a
+# one-shot command should not pay for the HMI's asyncio or the identification tools). A command
+# missing here still works: the full parser is built (tests check that this table is complete).
+_COMMAND_MODULE = {
+    "vehicle": "rovlab.interfaces.cli_vehicle",
+    "thruster": "rovlab.interfaces.cli_vehicle",
+    "allocate": "rovlab.interfaces.cli_vehicle",
+    "identify": "rovlab.interfaces.cli_ident",
+    "added-mass": "rovlab.interfaces.cli_ident",
+    "lab": "rovlab.interfaces.cli_ident",
+    "simulate": "rovlab.interfaces.cli_sim",
+    "scenarios": "rovlab.interfaces.cli_sim",
+    "demo": "rovlab.interfaces.cli_sim",
+    "design": "rovlab.interfaces.cli_design",
+    "filter": "rovlab.interfaces.cli_design",
+    "hmi": "rovlab.interfaces.cli_hmi",
+}
+
+
 class UserError(Exception):
     """An error caused by the user's input: printed without a traceback, exit status 2."""
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(modules: Sequence[str] = _COMMAND_MODULES) -> argparse.ArgumentParser:
+    """The ``rovlab`` parser with the sub-commands of ``modules`` (default: all)."""
     parser = argparse.ArgumentParser(
         prog="rovlab",
         description="Model, identify, estimate, control and simulate small underwater vehicles.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in _COMMAND_MODULES:
+    for name in modules:
         importlib.import_module(name).register(sub)
     return parser
+
+
+def _parser_for(argv: Sequence[str]) -> argparse.ArgumentParser:
+    """Only the module of the command named first (all of them for --help or an unknown one)."""
+    command = next((a for a in argv if not a.startswith("-")), None)
+    if command in _COMMAND_MODULE and not any(a in ("-h", "--help") for a in argv[:argv.index(command)]):
+        return build_parser((_COMMAND_MODULE[command],))
+    return build_parser()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     from rovlab.params.validate import ConfigError
 
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = _parser_for(argv)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
@@ -53,4 +82,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # `python -m rovlab.interfaces.cli`: run the imported module's main, whose UserError is the
+    # class the sub-commands raise (this __main__ copy has its own, which would not catch it)
+    from rovlab.interfaces.cli import main as _main
+
+    sys.exit(_main())

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from typing import Any
 
@@ -30,6 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     fil.add_argument("log", help="CSV log: time_s, tau_Z, tau_N and one column per fused sensor channel "
                                  "(e.g. z_qualisys, z_pressure, psi_qualisys); empty or nan = no sample")
     fil.add_argument("--out", required=True, help="output CSV (- for standard output)")
+    fil.add_argument("--max-gap-steps", type=int, default=10_000, metavar="N",
+                     help="a gap of more than N filter samples restarts the filter from its prior instead of "
+                          "predicting through it (default 10000)")
     _common(fil)
     fil.set_defaults(func=_cmd_filter)
 
@@ -89,25 +93,37 @@ def _cmd_design(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(info, indent=1))
         return 0
+    # SI units throughout (radians, never degrees): the same numbers as --json, labelled
     print(f"vehicle {vehicle.name}, configuration {config.name} ({config.file}); sample time {model.h:g} s")
-    print(f"  model: M_w = {p.M_w:.6g} kg, M_r = {p.M_r:.6g} kg m^2, Z_w = {p.Z_w:.6g}, N_r = {p.N_r:.6g}, "
-          f"T_w = {model.T_w:.6g} s, T_r = {model.T_r:.6g} s")
-    print("  measurements:")
+    print("  units: states z [m], psi [rad], w [m/s], r [rad/s], b_w [N], b_r [N m]; inputs Z [N], N [N m]")
+    print(f"  model: M_w = {p.M_w:.6g} kg, M_r = {p.M_r:.6g} kg m^2, Z_w = {p.Z_w:.6g} kg/s, "
+          f"N_r = {p.N_r:.6g} kg m^2/s")
+    print(f"    velocity time constants: heave M_w/-Z_w = {_ratio(p.M_w, -p.Z_w)}, "
+          f"yaw M_r/-N_r = {_ratio(p.M_r, -p.N_r)}")
+    print(f"  bias model (Gauss-Markov): time constants T_w = {model.T_w:.6g} s (b_w), T_r = {model.T_r:.6g} s (b_r)")
+    w = np.diag(model.W)
+    print("  process noise W = diag(" + ", ".join(f"{name} {v:.6g}" for name, v in zip(model.states, w)) + ")")
+    print("  measurements (variance in the channel's units squared: m^2 for z, rad^2 for psi):")
     for c in model.channels:
         gate = "off" if not np.isfinite(c.gate_threshold) else f"chi2 {c.gate_threshold:.3g}"
-        print(f"    {c.name:16s} column {c.column:14s} variance {c.variance:.6g}  l_z {c.offset:+.4g} m  "
+        unit = "rad^2" if c.angle else "m^2"
+        print(f"    {c.name:16s} column {c.column:14s} variance {c.variance:.6g} {unit}  l_z {c.offset:+.4g} m  "
               f"timeout {c.timeout_s:g} s  gate {gate}")
     if model.observable:
         print("  observable: yes")
     else:
         print(f"  observable: NO -- cannot estimate {', '.join(model.unobservable)} "
               f"({'; '.join(info['unobservable_directions'])})")
-    for name in ("Phi", "Delta", "Q"):
+    for name in ("Phi", "Delta", "Gamma", "Q", "H", "R"):
         _print_matrix(name, getattr(model, name))
-    _print_matrix("K (LQR)", lqr.K)
+    _print_matrix("K (LQR) on [z, psi, w, r]", lqr.K)
     _print_matrix(f"P (reference gain, {lqr.reference})", lqr.P)
     print(f"  |closed-loop poles| = {', '.join(f'{a:.4f}' for a in np.abs(lqr.poles))}")
     return 0
+
+
+def _ratio(a: float, b: float) -> str:
+    return f"{a / b:.6g} s" if b > 0 else "none (no damping)"
 
 
 def _print_matrix(name: str, M: np.ndarray) -> None:
@@ -120,56 +136,122 @@ def _print_matrix(name: str, M: np.ndarray) -> None:
 # filter
 # --------------------------------------------------------------------------------------------
 
-def _cmd_filter(args: argparse.Namespace) -> int:
-    from rovlab.estimation.fusion import EVENT_NONFINITE, EVENT_REJECTED, EVENT_USED, STATUS_LOST
-    from rovlab.estimation.kalman import DepthHeadingFilter, steps_between
-    from rovlab.interfaces.cli import UserError
-    from rovlab.io.logs import read_log, write_csv
+def _check_initial(config, model) -> None:
+    """Refuse an initial belief no filter can start from (e.g. a depth of 1e308 m)."""
+    from rovlab.estimation.kalman import MAX_ABS_SAMPLE
 
+    problems = []
+    for i, name in enumerate(model.states):
+        x, sd = float(model.x0[i]), float(np.sqrt(max(model.P0[i, i], 0.0)))
+        if not abs(x) <= MAX_ABS_SAMPLE:
+            problems.append(Problem(config.file, f"initial.state.{name}", x,
+                                    f"|value| <= {MAX_ABS_SAMPLE:g} (SI units)"))
+        if not sd <= MAX_ABS_SAMPLE:
+            problems.append(Problem(config.file, f"initial.std.{name}", sd, f"<= {MAX_ABS_SAMPLE:g} (SI units)"))
+    if problems:
+        raise ConfigError(problems, "configuration")
+
+
+def _cmd_filter(args: argparse.Namespace) -> int:
+    from rovlab.estimation.fusion import (
+        EVENT_NONFINITE, EVENT_REJECTED, EVENT_USED, REASON_NAMES, STATUS_LOST, STATUS_NAMES, status_label,
+    )
+    from rovlab.estimation.kalman import DepthHeadingFilter, IntervalError, StreamingFilter
+    from rovlab.interfaces.cli import UserError
+    from rovlab.io.logs import ChunkWriter, LogStream
+
+    if args.max_gap_steps < 1:
+        raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
     vehicle, config, model = _load(args)
+    _check_initial(config, model)
     filt = DepthHeadingFilter(model)
     columns = [c.column for c in model.channels]
-    log = read_log(args.log, required=("time_s",) + INPUT_COLUMNS + tuple(columns))
-    t = log.time
-    n_predict, bad = steps_between(t, model.h)
-    if bad is not None:
-        dt = float(t[bad] - t[bad - 1])
-        raise ConfigError([Problem(log.file, log.where(bad, "time_s"),
-                                   f"a step of {dt:.6g} s after line {int(log.lines[bad - 1])}",
-                                   f"a whole number of filter sample times h = {model.h:g} s (within 25%)")],
-                          "log")
-    u = np.column_stack([log[c] for c in INPUT_COLUMNS])
-    y = np.column_stack([log[c] for c in columns])
-    run = filt.run(t, u, y, n_predict=n_predict)
-
-    out: dict[str, Any] = {"time_s": t}
-    for i, s in enumerate(model.states):
-        out[s] = run.x[:, i]
-    for i, s in enumerate(model.states):
-        out[f"var_{s}"] = run.variance[:, i]
-    for j, c in enumerate(model.channels):
-        out[f"status_{c.column}"] = run.status_labels(j)
+    stream = LogStream(args.log, required=("time_s",) + INPUT_COLUMNS + tuple(columns))
+    runner = StreamingFilter(filt, max_gap_steps=args.max_gap_steps)
+    m = len(columns)
+    # status codes -> labels ('ok', 'lost-timeout', ...): code = 8 status + reason
+    assert len(REASON_NAMES) <= 8
+    labels = [status_label(c // 8, c % 8) if c // 8 < len(STATUS_NAMES) and c % 8 < len(REASON_NAMES) else "?"
+              for c in range(8 * len(STATUS_NAMES))]
+    names = ["time_s", *model.states, *(f"var_{s}" for s in model.states), *(f"status_{c}" for c in columns)]
     comments = [f"rovlab filter {args.log}: vehicle {vehicle.name}, configuration {config.name}, "
                 f"h = {model.h:g} s", "units: SI (m, rad, m/s, rad/s, N, N m); var_* are the variances"]
+    samples = np.zeros(m, dtype=np.int64)
+    used = np.zeros(m, dtype=np.int64)
+    rejected = np.zeros(m, dtype=np.int64)
+    faulty = np.zeros(m, dtype=np.int64)
+    lost = np.zeros(m, dtype=np.int64)
+    gaps = 0
+    n_rows = 0
+    t_first = t_last = t_prev = math.nan
+
+    def emit(writer: ChunkWriter, run) -> None:
+        nonlocal n_rows
+        out: dict[str, Any] = {"time_s": run.t}
+        for i, s in enumerate(model.states):
+            out[s] = run.x[:, i]
+        for i, s in enumerate(model.states):
+            out[f"var_{s}"] = run.variance[:, i]
+        for j, c in enumerate(columns):
+            out[f"status_{c}"] = (run.status[:, j].astype(np.int32) * 8 + run.reason[:, j], labels)
+            used[j] += int(np.count_nonzero(run.event[:, j] == EVENT_USED))
+            rejected[j] += int(np.count_nonzero(run.event[:, j] == EVENT_REJECTED))
+            faulty[j] += int(np.count_nonzero(run.event[:, j] == EVENT_NONFINITE))
+            lost[j] += int(np.count_nonzero(run.status[:, j] >= STATUS_LOST))
+        writer.write(out)
+        n_rows += run.t.size
+
     try:
-        write_csv(args.out, out, comments=comments, float_format="%.10g", exact=("time_s",))
+        writer = ChunkWriter(args.out, names, comments=comments, significant=10, exact=("time_s",))
     except OSError as exc:
         raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    with writer:
+        try:
+            chunks = iter(stream)
+            chunk = next(chunks, None)
+            while chunk is not None:
+                nxt = next(chunks, None)
+                t = chunk.data["time_s"]
+                if math.isnan(t_first):
+                    t_first = float(t[0])
+                t_last = float(t[-1])
+                u = np.column_stack([chunk.data[c] for c in INPUT_COLUMNS])
+                y = np.column_stack([chunk.data[c] for c in columns])
+                samples += np.count_nonzero(~np.isnan(y), axis=0)
+                dt = np.diff(np.concatenate([[t_prev], t]) if math.isfinite(t_prev) else t)
+                gaps += int(np.count_nonzero((dt > 1.5 * model.h) & (dt <= (args.max_gap_steps + 0.5) * model.h)))
+                t_prev = float(t[-1])
+                for run in runner.feed(t, u, y, final=nxt is None):
+                    emit(writer, run)
+                chunk = nxt
+        except IntervalError as exc:
+            raise ConfigError([Problem(stream.file, stream.where(exc.row, "time_s"),
+                                       f"a step of {exc.dt:.6g} s after line {stream.line_of(exc.row - 1)}",
+                                       f"a whole number of filter sample times h = {model.h:g} s (within 25%)")],
+                              "log") from None
+        except OSError as exc:
+            raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+        if runner.restarts > 100:
+            raise ConfigError([Problem(stream.file, stream.where(runner.restart_rows[0], "time_s"),
+                                       f"{runner.restarts} gaps longer than {args.max_gap_steps} filter samples",
+                                       f"a log sampled near the configuration's sample time h = {model.h:g} s "
+                                       f"({config.file}: sample_time); gaps are exceptions")], "log")
 
     report = sys.stderr if args.out == "-" else sys.stdout
-    span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
-    print(f"filtered {len(t)} samples ({span:g} s) of {args.log} with {vehicle.name}/{config.name}"
+    span = t_last - t_first if n_rows > 1 else 0.0
+    print(f"filtered {n_rows} samples ({span:g} s) of {args.log} with {vehicle.name}/{config.name}"
           + ("" if args.out == "-" else f" -> {args.out}"), file=report)
-    gaps = int(np.sum(n_predict[:-1] > 1))
     if gaps:
         print(f"  {gaps} gap(s) in the log bridged by prediction", file=report)
+    if runner.restarts:
+        where = ", ".join(stream.where(r) for r in runner.restart_rows)
+        print(f"  {runner.restarts} gap(s) longer than {args.max_gap_steps} samples "
+              f"({args.max_gap_steps * model.h:g} s): the filter restarted from its prior at {where}"
+              + (" ..." if runner.restarts > len(runner.restart_rows) else ""), file=report)
+    if runner.absurd:
+        print(f"  {runner.absurd} value(s) beyond +-1e6 treated as faulty samples (inputs held)", file=report)
     for j, c in enumerate(model.channels):
-        lost = run.status[:, j] >= STATUS_LOST
-        samples = int(np.sum(~np.isnan(y[:, j])))
-        used = int(np.sum(run.event[:, j] == EVENT_USED))
-        rejected = int(np.sum(run.event[:, j] == EVENT_REJECTED))
-        faulty = int(np.sum(run.event[:, j] == EVENT_NONFINITE))
-        print(f"  {c.name:16s} {samples} samples, {used} used, {rejected} rejected by the gate"
-              + (f", {faulty} not finite" if faulty else "")
-              + f"; lost {100.0 * lost.mean():.1f}% of the time", file=report)
+        print(f"  {c.name:16s} {samples[j]} samples, {used[j]} used, {rejected[j]} rejected by the gate"
+              + (f", {faulty[j]} not finite" if faulty[j] else "")
+              + f"; lost {100.0 * lost[j] / max(n_rows, 1):.1f}% of the time", file=report)
     return 0

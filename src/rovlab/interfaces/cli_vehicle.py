@@ -73,7 +73,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
     v = _load(args.vehicle)
     B = configuration_matrix(v)
-    alloc = Allocator(v)
+    alloc = Allocator(v, compiled=False)  # only its thrust limits: no numba
     info: dict[str, Any] = {
         "name": v.name,
         "description": v.description,
@@ -198,12 +198,13 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
     if not all(math.isfinite(x) for x in args.wrench):
         raise UserError(f"--wrench values must be finite, got {args.wrench}")
     v = _load(args.vehicle)
+    # one allocation: the plain-Python kernels (same numbers) beat importing numba and compiling
     if args.mode == "unconstrained":
-        alloc = Allocator(v, saturation=False)
+        alloc = Allocator(v, saturation=False, compiled=False)
     elif args.mode == "scale":
-        alloc = Allocator(v, priority=SCALE_ALL)
+        alloc = Allocator(v, priority=SCALE_ALL, compiled=False)
     else:
-        alloc = Allocator(v)
+        alloc = Allocator(v, compiled=False)
     res = alloc.allocate(np.array(args.wrench))
     if args.json:
         print(_json(res.as_dict()))

@@ -18,20 +18,19 @@ import csv
 import io
 import math
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Iterable, Mapping, Sequence
+from typing import IO, Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from rovlab.io.tables import scan_csv
+from rovlab.io.tables import NUMBER_EXPECTED, RANGE_EXPECTED, number_problem, parse_number, scan_csv  # noqa: F401
 from rovlab.params.validate import ConfigError, Problem
 
 _MAX_PROBLEMS = 20
 _MISSING = {"", "nan", "NaN", "NAN", "na", "NA"}
-
-
 @dataclass(frozen=True, eq=False)
 class Log:
     """The columns of one log as float arrays (NaN = no value), with the file line of each row."""
@@ -87,34 +86,16 @@ def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
     read as numbers when every cell is one, and kept as text otherwise (``Log.text``).
     """
     text = text.removeprefix("\ufeff")
-    comments, header, header_line, rows, row_lines = scan_csv(
-        text, split=lambda line: next(csv.reader([line])) if '"' in line else line.split(","))
+    comments, header, header_line, rows, row_lines = scan_csv(text, split=_split)
     header = [c.strip() for c in header] if header is not None else None
 
     need = [time_column] + [c for c in required if c != time_column]
-    if header is None:
-        raise ConfigError([Problem(file, "", "an empty file",
-                                   "a header line of column names: " + ", ".join(need))], "log")
-    where_header = f"line {header_line} (header)"
-    problems: list[Problem] = []
-    for i, name in enumerate(header):
-        if not name:
-            problems.append(Problem(file, where_header, f"column {i + 1} has no name", "a name for every column"))
-    dups = sorted({n for n in header if n and header.count(n) > 1})
-    if dups:
-        problems.append(Problem(file, where_header, ", ".join(dups), "unique column names"))
-    missing = [n for n in need if n not in header]
-    if missing:
-        sep = next((s for s in (";", "\t") if len(header) == 1 and s in header[0]), None)
-        hint = f" (the header looks {sep!r}-separated; use commas)" if sep else ""
-        problems.append(Problem(file, where_header, ", ".join(header) or "(no columns)",
-                                f"columns {', '.join(need)} (missing: {', '.join(missing)}){hint}"))
-    if problems:
-        raise ConfigError(problems, "log")
+    _check_header(file, header, header_line, need)
     if not rows:
         raise ConfigError([Problem(file, "", "no data rows", "at least one row after the header")], "log")
 
     n = len(header)
+    problems: list[Problem] = []
     values = np.full((len(rows), n), np.nan)
     it = header.index(time_column)
     strict = {header.index(c) for c in need}
@@ -135,12 +116,11 @@ def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
                         problems.append(Problem(file, f"line {number}, column {time_column!r}",
                                                 text_cell or "(empty)", "a time in seconds"))
                     continue
-                try:
-                    x = float(text_cell)
-                except ValueError:
+                x = parse_number(text_cell)
+                if x is None:
                     if c in strict:
                         problems.append(Problem(file, f"line {number}, column {header[c]!r}", text_cell,
-                                                "a number (or empty / nan for no value)"))
+                                                number_problem(text_cell)))
                     else:
                         text_cols[c] = []
                     continue
@@ -167,6 +147,499 @@ def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
     texts = {header[c]: [_unquote(cells[c]) for cells in rows] for c in text_cols}
     return Log(file=file, columns=tuple(header), data=data, lines=np.asarray(row_lines, dtype=np.int64),
                comments=tuple(comments), time_column=time_column, text=texts)
+
+
+def _split(line: str) -> list[str]:
+    return next(csv.reader([line])) if '"' in line else line.split(",")
+
+
+def _check_header(file: str, header: list[str] | None, header_line: int, need: Sequence[str]) -> None:
+    if header is None:
+        raise ConfigError([Problem(file, "", "an empty file",
+                                   "a header line of column names: " + ", ".join(need))], "log")
+    where_header = f"line {header_line} (header)"
+    problems: list[Problem] = []
+    for i, name in enumerate(header):
+        if not name:
+            problems.append(Problem(file, where_header, f"column {i + 1} has no name", "a name for every column"))
+    dups = sorted({n for n in header if n and header.count(n) > 1})
+    if dups:
+        problems.append(Problem(file, where_header, ", ".join(dups), "unique column names"))
+    missing = [n for n in need if n not in header]
+    if missing:
+        sep = next((s for s in (";", "\t") if len(header) == 1 and s in header[0]), None)
+        hint = f" (the header looks {sep!r}-separated; use commas)" if sep else ""
+        problems.append(Problem(file, where_header, ", ".join(header) or "(no columns)",
+                                f"columns {', '.join(need)} (missing: {', '.join(missing)}){hint}"))
+    if problems:
+        raise ConfigError(problems, "log")
+
+
+# --------------------------------------------------------------------------------------------
+# Streaming: long logs in chunks, memory flat
+# --------------------------------------------------------------------------------------------
+
+CHUNK_ROWS = 1 << 14  # ~1 MiB blocks: 1 << 16 measured ~100 MiB more peak memory, no faster
+
+
+@dataclass(frozen=True, eq=False)
+class LogChunk:
+    """Consecutive rows of a log: the wanted columns as float arrays (NaN = no value)."""
+
+    start: int  # index in the log of the first row
+    data: Mapping[str, np.ndarray]
+
+    def __len__(self) -> int:
+        return int(next(iter(self.data.values())).size)
+
+
+class LogStream:
+    """The time and ``required`` columns of a log, read in chunks of about ``chunk_rows`` rows.
+
+    Same format and the same refusals as :func:`read_log` (other columns are not read). The file
+    is read in blocks of whole lines (about 64 bytes a row), each parsed on its own, so memory
+    does not grow with the log. The fast path parses a block with pyarrow's CSV reader (the
+    ``arrow`` extra): numbers in C++. A block it cannot read, or with a cell it reads as inf or
+    NaN, or with times out of order, goes to the careful line scanner, which names the line and
+    column of each problem (up to 20 a block); without pyarrow the careful scanner reads every
+    block. Lines are counted only when a message needs one (:meth:`where`).
+
+    Iterating raises :class:`ConfigError` at the first chunk with a problem; the chunks before
+    it have been yielded already, so a consumer writes its output somewhere temporary first.
+    """
+
+    def __init__(self, path: str | Path, *, required: Sequence[str] = (), time_column: str = "time_s",
+                 chunk_rows: int = CHUNK_ROWS, fast: bool = True) -> None:
+        self.path = Path(path)
+        self.file = str(path)
+        self.time_column = time_column
+        self.need = [time_column] + [c for c in required if c != time_column]
+        self.chunk_rows = max(1, int(chunk_rows))
+        self.comments: list[str] = []
+        self._fast = fast
+        self._data_start = 0  # byte offset of the first line after the header
+        self._header_line = 0
+        self.header = self._read_header()
+        self.rows = 0  # rows yielded so far
+
+    # -- header -------------------------------------------------------------------------------
+    def _open_error(self, exc: OSError) -> ConfigError:
+        if isinstance(exc, FileNotFoundError):
+            return ConfigError([Problem(self.file, "", "no such file", "an existing CSV log")], "log")
+        if isinstance(exc, IsADirectoryError):
+            return ConfigError([Problem(self.file, "", "a directory", "a CSV log file")], "log")
+        return ConfigError([Problem(self.file, "", exc.strerror or str(exc), "a readable CSV log")], "log")
+
+    def _read_header(self) -> list[str]:
+        try:
+            f = open(self.path, "rb")
+        except OSError as exc:
+            raise self._open_error(exc) from None
+        header = None
+        with f:
+            number = 0
+            while True:
+                raw = f.readline()
+                if not raw:
+                    break
+                number += 1
+                try:
+                    line = raw.decode("utf-8")
+                except UnicodeDecodeError as exc:
+                    raise ConfigError([Problem(self.file, f"line {number}", "undecodable bytes",
+                                               f"UTF-8 text ({exc.reason})")], "log") from None
+                if number == 1:
+                    line = line.removeprefix("\ufeff")
+                line = line.strip()
+                if not line:
+                    continue
+                if line.startswith("#"):
+                    self.comments.append(line[1:].strip())
+                    continue
+                header = [c.strip() for c in _split(line)]
+                break
+            self._data_start = f.tell()
+        self._header_line = number
+        _check_header(self.file, header, number, self.need)
+        assert header is not None
+        return header
+
+    # -- line numbers (error path only) --------------------------------------------------------
+    def _data_lines(self, start_row: int = 0) -> Iterator[tuple[int, int, str]]:
+        """(row index, line number, text) of the data lines from ``start_row`` on."""
+        row = 0
+        number = self._header_line
+        with open(self.path, "rb") as f:
+            f.seek(self._data_start)
+            for raw in f:
+                number += 1
+                if row < start_row:  # counting only: bytes, no decoding
+                    stripped = raw.strip()
+                    if stripped and not stripped.startswith(b"#"):
+                        row += 1
+                    continue
+                try:
+                    line = raw.decode("utf-8").strip()
+                except UnicodeDecodeError as exc:
+                    raise ConfigError([Problem(self.file, f"line {number}", "undecodable bytes",
+                                               f"UTF-8 text ({exc.reason})")], "log") from None
+                if not line or line.startswith("#"):
+                    continue
+                yield row, number, line
+                row += 1
+
+    def line_of(self, row: int) -> int | None:
+        """File line of a data row (counted on demand: for messages)."""
+        for r, number, _ in self._data_lines(row):
+            if r == row:
+                return number
+            break
+        return None
+
+    def where(self, row: int, column: str | None = None) -> str:
+        number = self.line_of(row)
+        text = f"line {number}" if number is not None else "end of file"
+        return f"{text}, column {column!r}" if column else text
+
+    def problem(self, row: int, column: str | None, value: object, expected: str) -> ConfigError:
+        return ConfigError([Problem(self.file, self.where(row, column), value, expected)], "log")
+
+    # -- chunks -------------------------------------------------------------------------------
+    def __iter__(self) -> Iterator[LogChunk]:
+        """Blocks of whole lines (~``chunk_rows`` rows) parsed one at a time: memory stays flat."""
+        self.rows = 0
+        self._last_t = (math.nan, 0)  # (time, line or 0 if unknown) of the last row yielded
+        pa = None
+        if self._fast:
+            try:
+                import pyarrow
+                import pyarrow.csv  # noqa: F401
+                pa = pyarrow
+            except ImportError:
+                pa = None
+        block_bytes = max(1 << 12, 64 * self.chunk_rows)
+        with open(self.path, "rb") as f:
+            f.seek(self._data_start)
+            line = self._header_line  # lines before this block
+            rest = b""
+            while True:
+                block = f.read(block_bytes)
+                data = rest + block
+                if block:
+                    cut = data.rfind(b"\n") + 1
+                    if cut == 0:
+                        rest = data
+                        continue
+                    data, rest = data[:cut], data[cut:]
+                else:
+                    rest = b""
+                if data:
+                    chunk = self._parse_block(pa, data, line)
+                    if chunk is not None:
+                        yield chunk
+                    line += data.count(b"\n")
+                if not block:
+                    break
+        if self.rows == 0:
+            raise ConfigError([Problem(self.file, "", "no data rows", "at least one row after the header")], "log")
+
+    def _parse_block(self, pa, data: bytes, line: int) -> LogChunk | None:
+        """The rows of one block of whole lines (the first is line ``line + 1``)."""
+        if pa is not None:
+            csv_mod = pa.csv
+            try:
+                table = csv_mod.read_csv(
+                    pa.BufferReader(data),
+                    read_options=csv_mod.ReadOptions(column_names=self.header, use_threads=False),
+                    convert_options=csv_mod.ConvertOptions(
+                        include_columns=self.need, column_types={c: pa.float64() for c in self.need},
+                        null_values=sorted(_MISSING), strings_can_be_null=False, quoted_strings_can_be_null=True))
+            except pa.ArrowInvalid:
+                return self._careful_block(data, line)  # names the line and column of each problem
+            if table.num_rows == 0:
+                return None
+            values = {}
+            suspicious = np.zeros(table.num_rows, dtype=bool)
+            for c in self.need:
+                col = table.column(c)
+                parts = [_float_array(chunk) for chunk in col.chunks]
+                arr = parts[0] if len(parts) == 1 else np.concatenate(parts)
+                values[c] = arr
+                if c == self.time_column:
+                    suspicious |= ~np.isfinite(arr)
+                else:
+                    # inf, or NaN spelt other than as a missing value: the careful scanner decides
+                    if col.null_count != np.count_nonzero(np.isnan(arr)):
+                        suspicious |= np.isnan(arr)  # some NaN spelt otherwise than as a missing value
+                    suspicious |= np.isinf(arr)
+            if suspicious.any():
+                return self._careful_block(data, line)
+            t = values[self.time_column]
+            if np.any(np.diff(t) <= 0) or (self.rows and not t[0] > self._last_t[0]):
+                return self._careful_block(data, line)  # time order checked with line numbers
+            return self._chunk(values, None)
+        return self._careful_block(data, line)
+
+    def _careful_block(self, data: bytes, line: int) -> LogChunk | None:
+        """The careful scanner on one block: every problem with its line and column (up to 20)."""
+        idx = [self.header.index(c) for c in self.need]
+        n = len(self.header)
+        problems: list[Problem] = []
+        rows: list[list[float]] = []
+        lines: list[int] = []
+        number = line
+        for raw in data.split(b"\n")[:-1] if data.endswith(b"\n") else data.split(b"\n"):
+            number += 1
+            try:
+                text = raw.decode("utf-8").strip()
+            except UnicodeDecodeError as exc:
+                problems.append(Problem(self.file, f"line {number}", "undecodable bytes", f"UTF-8 text ({exc.reason})"))
+                continue
+            if not text or text.startswith("#"):
+                continue
+            cells = _split(text)
+            if len(cells) > n and not any(c.strip() for c in cells[n:]):
+                cells = cells[:n]
+            if len(cells) != n:
+                problems.append(Problem(self.file, f"line {number}", f"{len(cells)} fields",
+                                        f"{n} fields, one per column ({', '.join(self.header)})"))
+            else:
+                row = []
+                for c, i in zip(self.need, idx):
+                    x = _cell_value(self.file, number, c, cells[i].strip(), c == self.time_column, problems)
+                    row.append(math.nan if x is None else x)
+                rows.append(row)
+                lines.append(number)
+            if len(problems) >= _MAX_PROBLEMS:
+                break
+        _raise(problems)
+        if not rows:
+            return None
+        values = np.array(rows, dtype=float)
+        return self._chunk({c: values[:, j].copy() for j, c in enumerate(self.need)}, lines)
+
+    def _chunk(self, data: dict[str, np.ndarray], lines: list[int] | None) -> LogChunk:
+        t = data[self.time_column]
+        if lines is not None:
+            self._check_times(t, lines)
+        chunk = LogChunk(self.rows, data)
+        self.rows += t.size
+        self._last_t = (float(t[-1]), lines[-1] if lines is not None else 0)
+        return chunk
+
+    def _check_times(self, t: np.ndarray, lines: Sequence[int]) -> None:
+        prev_t, prev_line = self._last_t
+        full = np.concatenate([[prev_t], t]) if self.rows > 0 else t
+        offset = 1 if self.rows > 0 else 0
+        problems = []
+        for b in np.flatnonzero(np.diff(full) <= 0)[:_MAX_PROBLEMS]:
+            r = int(b) + 1 - offset  # index in this block
+            before = lines[r - 1] if r >= 1 else (prev_line or self.line_of(self.rows - 1))
+            what = "repeats" if full[b + 1] == full[b] else "goes back from"
+            problems.append(Problem(self.file, f"line {lines[r]}, column {self.time_column!r}", float(full[b + 1]),
+                                    f"strictly increasing times (it {what} {float(full[b])!r} on line {before})"))
+        _raise(problems)
+
+
+def _string_array(pa, texts: Sequence[str]):
+    """A pyarrow string array built from its buffers (no pandas import)."""
+    data = [t.encode("utf-8") for t in texts]
+    offsets = np.zeros(len(data) + 1, dtype=np.int32)
+    np.cumsum([len(d) for d in data], out=offsets[1:])
+    return pa.Array.from_buffers(pa.string(), len(data), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(data))])
+
+
+def _float_array(chunk) -> np.ndarray:
+    """A pyarrow float64 array as numpy, nulls as NaN, read from its buffers (pyarrow's own
+    to_numpy imports pandas for arrays with nulls: 0.4 s)."""
+    n = len(chunk)
+    validity, data = chunk.buffers()[:2]
+    arr = np.frombuffer(data, dtype=np.float64, count=chunk.offset + n)[chunk.offset:]
+    if chunk.null_count:
+        bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
+        arr = np.where(bits[chunk.offset:chunk.offset + n].astype(bool), arr, np.nan)
+    return arr
+
+
+def _cell_value(file: str, number: int, column: str, text: str, is_time: bool,
+                problems: list[Problem]) -> float | None:
+    """One cell of a wanted column (None = no value), or a problem appended."""
+    if text in _MISSING:
+        if is_time:
+            problems.append(Problem(file, f"line {number}, column {column!r}", text or "(empty)",
+                                    "a time in seconds"))
+        return None
+    x = parse_number(text)
+    if x is None:
+        problems.append(Problem(file, f"line {number}, column {column!r}", text, number_problem(text)))
+        return None
+    if is_time and not math.isfinite(x):
+        problems.append(Problem(file, f"line {number}, column {column!r}", text, "a finite time in seconds"))
+        return None
+    return x
+
+
+def _raise(problems: list[Problem]) -> None:
+    if not problems:
+        return
+    if len(problems) >= _MAX_PROBLEMS:
+        problems = problems[:_MAX_PROBLEMS] + [Problem(problems[0].file, "", "more problems",
+                                                       f"(stopped after the first {_MAX_PROBLEMS})")]
+    raise ConfigError(problems, "log")
+
+
+def round_significant(values: np.ndarray, digits: int) -> np.ndarray:
+    """``values`` rounded to ``digits`` significant digits (vectorised ``float('%.{digits}g' % x)``).
+
+    x * 10^k is rounded to an integer m and divided by the exact power of ten, which gives the
+    double nearest to m 10^-k: its shortest round-trip form has at most ``digits`` digits. Values
+    beyond 1e+-22 from the scale that powers of ten stay exact, inf and NaN are returned as they are.
+    """
+    a = np.asarray(values, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        k = (digits - 1) - np.floor(np.log10(np.abs(a)))
+        ok = np.isfinite(k) & (np.abs(k) <= 22)
+        k = np.where(ok, k, 0.0)
+        scale = 10.0 ** np.abs(k)
+        up = k >= 0
+        r = np.where(up, np.round(a * scale) / scale, np.round(a / scale) * scale)
+    return np.where(ok, r, a)
+
+
+class ChunkWriter:
+    """A CSV file written a chunk of rows at a time: floats in shortest round-trip form (or rounded
+    to ``significant`` digits, except the ``exact`` columns), NaN as an empty cell, text columns as
+    given (no quoting: labels such as 'lost-timeout' only).
+
+    Atomic like :func:`write_csv`: rows go to a temporary file renamed over ``target`` by
+    :meth:`close`; :meth:`abort` (or an exception inside ``with``) removes it, so a refused or
+    interrupted run leaves no half-written output. ``-`` writes to standard output. With pyarrow
+    (the ``arrow`` extra) chunks are rounded and formatted on a worker thread (pyarrow's writer
+    releases the GIL, so this overlaps the caller's next chunk; two workers measured no faster on
+    two cores and used more memory) and written in order, at most three chunks in flight;
+    Python formats them otherwise.
+    """
+
+    _IN_FLIGHT = 3
+
+    def __init__(self, target: str | Path, names: Sequence[str], *, comments: Iterable[str] = (),
+                 significant: int | None = None, exact: Iterable[str] = ()) -> None:
+        self.names = list(names)
+        self.target = str(target)
+        self.significant = significant
+        self.exact = set(exact)
+        self._tmp: Path | None = None
+        self._pool = None
+        self._pending: list = []
+        if self.target == "-":
+            self._f = sys.stdout.buffer
+        else:
+            path = Path(target)
+            self._tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+            self._f = open(self._tmp, "wb")
+        try:
+            import pyarrow
+            import pyarrow.csv  # noqa: F401
+            self._pa = pyarrow
+        except ImportError:
+            self._pa = None
+        head = "".join(f"# {line}\n" for line in comments) + ",".join(_quote(n) for n in self.names) + "\n"
+        self._f.write(head.encode("utf-8"))
+        if self._pa is not None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rovlab-csv")
+
+    def _floats(self, name: str, col: np.ndarray) -> np.ndarray:
+        if self.significant is not None and name not in self.exact:
+            return round_significant(col, self.significant)
+        return col
+
+    def _format(self, columns: Mapping[str, Any]) -> Any:
+        """One chunk as CSV bytes (a pyarrow buffer), on a worker thread."""
+        pa = self._pa
+        arrays = []
+        # arrays built from their buffers: pa.array() imports pandas (0.4 s) to inspect its input
+        for name in self.names:
+            col = columns[name]
+            if isinstance(col, tuple):
+                codes, labels = col
+                codes = np.ascontiguousarray(codes, dtype=np.int32)
+                index = pa.Array.from_buffers(pa.int32(), codes.size, [None, pa.py_buffer(codes)])
+                arrays.append(pa.DictionaryArray.from_arrays(index, _string_array(pa, labels)).cast(pa.string()))
+            elif isinstance(col, np.ndarray) and col.dtype.kind == "f":
+                col = np.ascontiguousarray(self._floats(name, col), dtype=np.float64)
+                nan = np.isnan(col)  # NaN -> null -> empty cell
+                nulls = int(np.count_nonzero(nan))
+                valid = pa.py_buffer(np.packbits(~nan, bitorder="little")) if nulls else None
+                arrays.append(pa.Array.from_buffers(pa.float64(), col.size, [valid, pa.py_buffer(col)],
+                                                    null_count=nulls))
+            else:
+                arrays.append(col if isinstance(col, pa.Array) else _string_array(pa, [str(v) for v in col]))
+        sink = pa.BufferOutputStream()
+        pa.csv.write_csv(pa.Table.from_arrays(arrays, names=self.names), sink,
+                         write_options=pa.csv.WriteOptions(include_header=False, quoting_style="none"))
+        return sink.getvalue()
+
+    def write(self, columns: Mapping[str, np.ndarray | Sequence[str] | tuple[np.ndarray, Sequence[str]]]) -> None:
+        """Append rows: each column a float array, a sequence of strings, or (codes, labels): the
+        label of each integer code (written without building one string per row). The arrays
+        must not be modified afterwards (they may still be formatting)."""
+        if self._pool is not None:
+            self._pending.append(self._pool.submit(self._format, dict(columns)))
+            while len(self._pending) >= self._IN_FLIGHT:
+                self._f.write(self._pending.pop(0).result())
+            return
+        cols = []
+        for name in self.names:
+            col = columns[name]
+            if isinstance(col, tuple):
+                codes, labels = col
+                cols.append(np.asarray(list(labels), dtype=object)[np.asarray(codes, dtype=np.intp)].tolist())
+            elif isinstance(col, np.ndarray) and col.dtype.kind == "f":
+                cols.append(["" if v != v else repr(v) for v in self._floats(name, col).tolist()])
+            else:
+                cols.append([str(v) for v in (col.tolist() if hasattr(col, "tolist") else col)])
+        self._f.write("".join(",".join(row) + "\n" for row in zip(*cols)).encode("utf-8"))
+
+    def _drain(self, keep: bool) -> None:
+        pending, self._pending = self._pending, []
+        try:
+            for future in pending:
+                if keep:
+                    self._f.write(future.result())
+                else:
+                    future.cancel()
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True, cancel_futures=not keep)
+                self._pool = None
+
+    def close(self) -> None:
+        self._drain(keep=True)
+        if self._tmp is None:
+            self._f.flush()
+            return
+        self._f.close()
+        os.replace(self._tmp, self.target)
+        self._tmp = None
+
+    def abort(self) -> None:
+        self._drain(keep=False)
+        if self._tmp is None:
+            return
+        self._f.close()
+        self._tmp.unlink(missing_ok=True)
+        self._tmp = None
+
+    def __enter__(self) -> "ChunkWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 def write_csv(target: str | Path | IO[str], columns: Mapping[str, Sequence | np.ndarray], *,

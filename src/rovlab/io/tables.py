@@ -58,6 +58,33 @@ def column_limit(name: str) -> float:
     return DEFAULT_LIMIT
 
 
+# A number in a log (rovlab filter; io/logs.py), as C, CSV readers and spreadsheets write one: ASCII digits, optional sign, point and
+# exponent, or inf/infinity. Python's float() also takes '1_000' and non-ASCII digits ('１２'),
+# which no other tool reads as numbers: such cells are refused.
+_LOG_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:inf|infinity))")
+NUMBER_EXPECTED = "a number (ASCII digits, e.g. 1.5e-3; or empty / nan for no value)"
+RANGE_EXPECTED = "a number within +-1.8e308 (inf is written inf)"
+
+
+def parse_number(text: str) -> float | None:
+    """The float a (stripped) CSV cell holds, or None if it is not a number in the log format.
+
+    Overflowing literals such as ``1e400`` are not numbers (they would silently become inf, which
+    in a log means a faulty sample): None too; the caller words the refusal.
+    """
+    if not _LOG_NUMBER.fullmatch(text):
+        return None
+    x = float(text)
+    if math.isinf(x) and "n" not in text.lower():
+        return None  # 1e400: out of range, not 'inf'
+    return x
+
+
+def number_problem(text: str) -> str:
+    """What was expected of a cell that parse_number refused."""
+    return RANGE_EXPECTED if _LOG_NUMBER.fullmatch(text) else NUMBER_EXPECTED
+
+
 @dataclass(frozen=True, eq=False)
 class DataTable:
     """Columns of one CSV file as float arrays, with the file line of every row."""

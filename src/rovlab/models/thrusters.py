@@ -12,6 +12,8 @@ Two models, chosen per thruster in the vehicle file:
 
 Commands are saturated to each thruster's [pwm_min_us, pwm_max_us]; thrust limits follow.
 The ``ThrusterBank`` packs all thrusters of a vehicle into arrays for compiled per-step code.
+The kernels (``bank_force``, ``bank_pwm``) are compiled on first access, so importing this module
+does not import numba (see :mod:`rovlab._jit`).
 """
 
 from __future__ import annotations
@@ -21,17 +23,18 @@ from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import LazyKernels
+from rovlab.models import thruster_kernels as _plain
+from rovlab.models.thruster_kernels import (  # noqa: F401  (re-exported: the row layout)
+    K_DEAD, K_KIND, K_KLN, K_KLP, K_KNLN, K_KNLP, K_NEUTRAL, K_PMAX, K_PMIN, KIND_QUADRATIC, KIND_TABLE,
+    ZERO_FORCE,
+)
 from rovlab.params.vehicle import Thruster, Vehicle
 
 KGF = 9.80665  # N per kilogram-force
 TABLE_VOLTAGES = (10, 12, 14, 16, 18, 20)
 TABLE_PWM = np.arange(1100.0, 1900.0 + 1e-9, 4.0)  # the maker's grid [us]
-
-# Columns of a packed thruster row.
-K_KIND, K_NEUTRAL, K_DEAD, K_KLP, K_KNLP, K_KLN, K_KNLN, K_PMIN, K_PMAX = range(9)
-KIND_QUADRATIC, KIND_TABLE = 0.0, 1.0
 
 
 @functools.lru_cache(maxsize=None)
@@ -70,88 +73,11 @@ def t200_force_table(voltage: float) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------------------------
-# Compiled kernels on a packed row
+# Kernels on packed rows: plain Python in rovlab.models.thruster_kernels, compiled on first use
 # --------------------------------------------------------------------------------------------
 
-@njit(cache=True)
-def _quad_force(row: np.ndarray, pwm: float) -> float:
-    pwm = min(max(pwm, row[K_PMIN]), row[K_PMAX])
-    u = pwm - row[K_NEUTRAL]
-    d = row[K_DEAD]
-    if u > d:
-        s = u - d
-        return row[K_KLP] * s + row[K_KNLP] * s * s
-    if u < -d:
-        s = u + d
-        return row[K_KLN] * s - row[K_KNLN] * s * s
-    return 0.0
-
-
-ZERO_FORCE = 1e-10  # |f| below this [N] is commanded as neutral (it lies in the dead band anyway)
-
-
-@njit(cache=True)
-def _quad_pwm(row: np.ndarray, f: float) -> float:
-    if abs(f) <= ZERO_FORCE:
-        return row[K_NEUTRAL]
-    if f > 0.0:
-        s = 2.0 * f / (row[K_KLP] + np.sqrt(row[K_KLP] ** 2 + 4.0 * row[K_KNLP] * f))
-        pwm = row[K_NEUTRAL] + row[K_DEAD] + s
-    else:
-        s = -2.0 * (-f) / (row[K_KLN] + np.sqrt(row[K_KLN] ** 2 + 4.0 * row[K_KNLN] * (-f)))
-        pwm = row[K_NEUTRAL] - row[K_DEAD] + s
-    return min(max(pwm, row[K_PMIN]), row[K_PMAX])
-
-
-@njit(cache=True)
-def _table_force(row: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: float) -> float:
-    pwm = min(max(pwm, row[K_PMIN]), row[K_PMAX])
-    return np.interp(pwm, grid_pwm, grid_f)
-
-
-@njit(cache=True)
-def _table_pwm(row: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, f: float) -> float:
-    if abs(f) <= ZERO_FORCE:
-        return row[K_NEUTRAL]
-    n = grid_pwm.shape[0]
-    if f > 0.0:
-        # first grid point (from neutral upwards) whose force reaches f, then linear back
-        for k in range(n - 1):
-            if grid_pwm[k + 1] > row[K_NEUTRAL] and grid_f[k + 1] >= f and grid_f[k + 1] > grid_f[k]:
-                t = (f - grid_f[k]) / (grid_f[k + 1] - grid_f[k])
-                pwm = grid_pwm[k] + max(t, 0.0) * (grid_pwm[k + 1] - grid_pwm[k])
-                return min(max(pwm, row[K_PMIN]), row[K_PMAX])
-        return row[K_PMAX]
-    for k in range(n - 1, 0, -1):
-        if grid_pwm[k - 1] < row[K_NEUTRAL] and grid_f[k - 1] <= f and grid_f[k - 1] < grid_f[k]:
-            t = (f - grid_f[k]) / (grid_f[k - 1] - grid_f[k])
-            pwm = grid_pwm[k] + max(t, 0.0) * (grid_pwm[k - 1] - grid_pwm[k])
-            return min(max(pwm, row[K_PMIN]), row[K_PMAX])
-    return row[K_PMIN]
-
-
-@njit(cache=True)
-def bank_force(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: np.ndarray) -> np.ndarray:
-    """Thrust of every thruster for a vector of PWM commands (saturated to their ranges)."""
-    out = np.empty(rows.shape[0])
-    for i in range(rows.shape[0]):
-        if rows[i, K_KIND] == KIND_QUADRATIC:
-            out[i] = _quad_force(rows[i], pwm[i])
-        else:
-            out[i] = _table_force(rows[i], grid_pwm, grid_f[i], pwm[i])
-    return out
-
-
-@njit(cache=True)
-def bank_pwm(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """PWM command of every thruster for a vector of thrusts (saturated to their ranges)."""
-    out = np.empty(rows.shape[0])
-    for i in range(rows.shape[0]):
-        if rows[i, K_KIND] == KIND_QUADRATIC:
-            out[i] = _quad_pwm(rows[i], force[i])
-        else:
-            out[i] = _table_pwm(rows[i], grid_pwm, grid_f[i], force[i])
-    return out
+_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True)
+__getattr__ = _kernels.module_getattr(__name__)  # bank_force, bank_pwm: numba dispatchers
 
 
 # --------------------------------------------------------------------------------------------
@@ -191,19 +117,22 @@ class ThrusterBank:
                 assert t.voltage is not None
                 rows[i, K_KIND] = KIND_TABLE
                 grid_force[i] = t200_force_table(t.voltage)
-        f_lo = bank_force(rows, TABLE_PWM, grid_force, rows[:, K_PMIN].copy())
-        f_hi = bank_force(rows, TABLE_PWM, grid_force, rows[:, K_PMAX].copy())
+        f_lo = _plain.bank_force(rows, TABLE_PWM, grid_force, rows[:, K_PMIN].copy())
+        f_hi = _plain.bank_force(rows, TABLE_PWM, grid_force, rows[:, K_PMAX].copy())
         for arr in (rows, grid_force, f_lo, f_hi):
             arr.setflags(write=False)
         return cls(tuple(t.name for t in thrusters), rows, TABLE_PWM, grid_force, f_lo, f_hi)
 
-    def force(self, pwm_us: np.ndarray) -> np.ndarray:
-        """Thrust [N] for a PWM command per thruster (saturated)."""
-        return bank_force(self.rows, self.grid_pwm, self.grid_force, _vec(pwm_us, len(self.names), "pwm_us"))
+    def force(self, pwm_us: np.ndarray, *, compiled: bool = True) -> np.ndarray:
+        """Thrust [N] for a PWM command per thruster (saturated). ``compiled=False`` runs the plain
+        Python kernel (no numba import or compilation: for a one-off call)."""
+        kernel = _kernels.compiled()["bank_force"] if compiled else _plain.bank_force
+        return kernel(self.rows, self.grid_pwm, self.grid_force, _vec(pwm_us, len(self.names), "pwm_us"))
 
-    def pwm(self, force: np.ndarray) -> np.ndarray:
-        """PWM [us] per thruster for a thrust per thruster (saturated)."""
-        return bank_pwm(self.rows, self.grid_pwm, self.grid_force, _vec(force, len(self.names), "force"))
+    def pwm(self, force: np.ndarray, *, compiled: bool = True) -> np.ndarray:
+        """PWM [us] per thruster for a thrust per thruster (saturated); ``compiled`` as in force()."""
+        kernel = _kernels.compiled()["bank_pwm"] if compiled else _plain.bank_pwm
+        return kernel(self.rows, self.grid_pwm, self.grid_force, _vec(force, len(self.names), "force"))
 
 
 def _vec(values: np.ndarray, n: int, what: str) -> np.ndarray:
@@ -216,13 +145,16 @@ def _vec(values: np.ndarray, n: int, what: str) -> np.ndarray:
 
 
 def force_from_pwm(thruster: Thruster, pwm_us: float) -> float:
-    """Thrust [N] of one thruster for a PWM command [us] (saturated to its range)."""
-    return float(ThrusterBank.from_thrusters([thruster]).force(np.array([pwm_us]))[0])
+    """Thrust [N] of one thruster for a PWM command [us] (saturated to its range).
+
+    One-off conversions run the plain kernels (no compilation); use a :class:`ThrusterBank` for
+    many."""
+    return float(ThrusterBank.from_thrusters([thruster]).force(np.array([pwm_us]), compiled=False)[0])
 
 
 def pwm_from_force(thruster: Thruster, force: float) -> float:
-    """PWM command [us] giving a thrust [N] (saturated to the thruster's range)."""
-    return float(ThrusterBank.from_thrusters([thruster]).pwm(np.array([force]))[0])
+    """PWM command [us] giving a thrust [N] (saturated to the thruster's range); plain kernels."""
+    return float(ThrusterBank.from_thrusters([thruster]).pwm(np.array([force]), compiled=False)[0])
 
 
 def thrust_limits(thruster: Thruster) -> tuple[float, float]:

@@ -1,0 +1,90 @@
+"""Thruster kernels on packed rows, in plain Python written in numba's subset (no numba import).
+
+:mod:`rovlab.models.thrusters` publishes them compiled (``bank_force``, ``bank_pwm``: what the
+simulator's compiled loop calls) and uses these plain versions where a command runs them a few
+times only, so that one-shot commands (``rovlab thruster``, ``allocate``, ``vehicle show``) never
+import numba nor compile anything. Row layout: the ``K_*`` columns below.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# Columns of a packed thruster row.
+K_KIND, K_NEUTRAL, K_DEAD, K_KLP, K_KNLP, K_KLN, K_KNLN, K_PMIN, K_PMAX = range(9)
+KIND_QUADRATIC, KIND_TABLE = 0.0, 1.0
+ZERO_FORCE = 1e-10  # |f| below this [N] is commanded as neutral (it lies in the dead band anyway)
+
+KERNELS = ("_quad_force", "_quad_pwm", "_table_force", "_table_pwm", "bank_force", "bank_pwm")
+
+
+def _quad_force(row: np.ndarray, pwm: float) -> float:
+    pwm = min(max(pwm, row[K_PMIN]), row[K_PMAX])
+    u = pwm - row[K_NEUTRAL]
+    d = row[K_DEAD]
+    if u > d:
+        s = u - d
+        return row[K_KLP] * s + row[K_KNLP] * s * s
+    if u < -d:
+        s = u + d
+        return row[K_KLN] * s - row[K_KNLN] * s * s
+    return 0.0
+
+
+def _quad_pwm(row: np.ndarray, f: float) -> float:
+    if abs(f) <= ZERO_FORCE:
+        return row[K_NEUTRAL]
+    if f > 0.0:
+        s = 2.0 * f / (row[K_KLP] + np.sqrt(row[K_KLP] ** 2 + 4.0 * row[K_KNLP] * f))
+        pwm = row[K_NEUTRAL] + row[K_DEAD] + s
+    else:
+        s = -2.0 * (-f) / (row[K_KLN] + np.sqrt(row[K_KLN] ** 2 + 4.0 * row[K_KNLN] * (-f)))
+        pwm = row[K_NEUTRAL] - row[K_DEAD] + s
+    return min(max(pwm, row[K_PMIN]), row[K_PMAX])
+
+
+def _table_force(row: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: float) -> float:
+    pwm = min(max(pwm, row[K_PMIN]), row[K_PMAX])
+    return np.interp(pwm, grid_pwm, grid_f)
+
+
+def _table_pwm(row: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, f: float) -> float:
+    if abs(f) <= ZERO_FORCE:
+        return row[K_NEUTRAL]
+    n = grid_pwm.shape[0]
+    if f > 0.0:
+        # first grid point (from neutral upwards) whose force reaches f, then linear back
+        for k in range(n - 1):
+            if grid_pwm[k + 1] > row[K_NEUTRAL] and grid_f[k + 1] >= f and grid_f[k + 1] > grid_f[k]:
+                t = (f - grid_f[k]) / (grid_f[k + 1] - grid_f[k])
+                pwm = grid_pwm[k] + max(t, 0.0) * (grid_pwm[k + 1] - grid_pwm[k])
+                return min(max(pwm, row[K_PMIN]), row[K_PMAX])
+        return row[K_PMAX]
+    for k in range(n - 1, 0, -1):
+        if grid_pwm[k - 1] < row[K_NEUTRAL] and grid_f[k - 1] <= f and grid_f[k - 1] < grid_f[k]:
+            t = (f - grid_f[k]) / (grid_f[k - 1] - grid_f[k])
+            pwm = grid_pwm[k] + max(t, 0.0) * (grid_pwm[k - 1] - grid_pwm[k])
+            return min(max(pwm, row[K_PMIN]), row[K_PMAX])
+    return row[K_PMIN]
+
+
+def bank_force(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: np.ndarray) -> np.ndarray:
+    """Thrust of every thruster for a vector of PWM commands (saturated to their ranges)."""
+    out = np.empty(rows.shape[0])
+    for i in range(rows.shape[0]):
+        if rows[i, K_KIND] == KIND_QUADRATIC:
+            out[i] = _quad_force(rows[i], pwm[i])
+        else:
+            out[i] = _table_force(rows[i], grid_pwm, grid_f[i], pwm[i])
+    return out
+
+
+def bank_pwm(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """PWM command of every thruster for a vector of thrusts (saturated to their ranges)."""
+    out = np.empty(rows.shape[0])
+    for i in range(rows.shape[0]):
+        if rows[i, K_KIND] == KIND_QUADRATIC:
+            out[i] = _quad_pwm(rows[i], force[i])
+        else:
+            out[i] = _table_pwm(rows[i], grid_pwm, grid_f[i], force[i])
+    return out
