@@ -35,6 +35,7 @@ _COMMAND_MODULE = {
     "design": "rovlab.interfaces.cli_design",
     "filter": "rovlab.interfaces.cli_design",
     "hmi": "rovlab.interfaces.cli_hmi",
+    "compare": "rovlab.interfaces.cli_compare",
 }
 
 
