@@ -20,7 +20,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 import _timing  # noqa: E402
-
 import numpy as np  # noqa: E402
 
 from rovlab.models import kinetics as kin  # noqa: E402

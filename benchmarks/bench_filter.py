@@ -26,11 +26,10 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-import _timing  # noqa: E402  (pins the BLAS/numba threads to 1 before numpy is imported)
-
 import time  # noqa: E402
 from dataclasses import replace  # noqa: E402
 
+import _timing  # noqa: E402  (pins the BLAS/numba threads to 1 before numpy is imported)
 import numpy as np  # noqa: E402
 
 N = 36_000  # 1 h at 10 Hz

@@ -15,13 +15,13 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-import _timing  # noqa: E402,F401  (pins the BLAS/numba threads to 1)
-
 import os  # noqa: E402
 import statistics  # noqa: E402
 import subprocess  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
+
+import _timing  # noqa: E402,F401  (pins the BLAS/numba threads to 1)
 
 PY = sys.executable
 ROVLAB = [PY, "-m", "rovlab.interfaces.cli"]

@@ -63,7 +63,8 @@ def dist(values: list[float]) -> str:
     if not values:
         return "-"
     v = sorted(values)
-    q = lambda p: v[min(len(v) - 1, int(p * (len(v) - 1) + 0.5))]
+    def q(p):
+        return v[min(len(v) - 1, int(p * (len(v) - 1) + 0.5))]
     return f"median {ms(q(0.5))}, p90 {ms(q(0.9))}, p99 {ms(q(0.99))}, max {ms(v[-1])} (n={len(v)})"
 
 

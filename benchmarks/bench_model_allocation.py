@@ -16,7 +16,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 import _timing  # noqa: E402  (sets the thread variables before numpy loads)
-
 import numpy as np  # noqa: E402
 from scipy.optimize import linprog, lsq_linear  # noqa: E402
 
@@ -111,11 +110,11 @@ def lexicographic_linprog(alloc: Allocator, tau6: np.ndarray) -> np.ndarray:
     A_eq = np.hstack([alloc.B, -np.array([np.where(alloc.level == lv, tau6, 0.0) for lv in levels]).T])
     bounds = list(zip(alloc.f_min, alloc.f_max)) + [(0.0, 1.0)] * len(levels)
     alpha = np.ones(alloc.n_levels)
-    for k, lv in enumerate(levels):
+    for j, lv in enumerate(levels):
         c = np.zeros(n + len(levels))
-        c[n + k] = -1.0
-        a = float(np.clip(linprog(c, A_eq=A_eq, b_eq=np.zeros(6), bounds=bounds, method="highs").x[n + k], 0, 1))
-        bounds[n + k] = (a, a)
+        c[n + j] = -1.0
+        a = float(np.clip(linprog(c, A_eq=A_eq, b_eq=np.zeros(6), bounds=bounds, method="highs").x[n + j], 0, 1))
+        bounds[n + j] = (a, a)
         alpha[lv] = a
     return alpha
 

@@ -31,7 +31,7 @@ def _machine() -> str:
             versions.append(f"{mod} {__import__(mod).__version__}")
         except ImportError:
             versions.append(f"{mod} -")
-    return (f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}; {cpu}, {os.cpu_count()} cores; "
+    return (f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M UTC}; {cpu}, {os.cpu_count()} cores; "
             f"load {load:.1f} at start; Python {platform.python_version()}, {', '.join(versions)}")
 
 

@@ -18,7 +18,8 @@ dispatcher), so a compiled kernel never calls a plain one.
 from __future__ import annotations
 
 import types
-from typing import Any, Callable, Iterable
+from collections.abc import Callable, Iterable
+from typing import Any
 
 
 class LazyKernels:

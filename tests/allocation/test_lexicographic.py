@@ -5,7 +5,8 @@ variables [f (n thrusters), alpha_l (one per demanded level)], equalities B f = 
 (so every DOF demanded zero, K and M included, is kept at zero), bounds f_min <= f <= f_max and
 0 <= alpha_l <= 1; maximise alpha_0, fix it, maximise alpha_1, ... (the definition of a
 lexicographic optimum; prioritised allocation as surveyed by Johansen & Fossen 2013, "Control
-allocation - a survey", Automatica 49(5), 1087-1103). The kernel's fractions must equal the LP's on thousands of random saturating demands
+allocation - a survey", Automatica 49(5), 1087-1103). The kernel's fractions must equal the LP's on
+thousands of random saturating demands
 (fixed seed) for both packaged vehicles.
 """
 

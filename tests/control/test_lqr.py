@@ -8,13 +8,18 @@ import numpy as np
 import pytest
 
 from rovlab.control.lqg import LQGController, lqg_tau, tau_to_wrench
-from rovlab.sim.autopilot import ThrusterMapping
 from rovlab.control.lqr import (
-    bryson, design_lqr, design_lqr_from_config, dlqr, reference_gain_continuous, reference_gain_discrete,
+    bryson,
+    design_lqr,
+    design_lqr_from_config,
+    dlqr,
+    reference_gain_continuous,
+    reference_gain_discrete,
 )
 from rovlab.models.linear import HeaveYawParams
 from rovlab.params.design import load_design_config
 from rovlab.params.vehicle import load_vehicle
+from rovlab.sim.autopilot import ThrusterMapping
 
 # SPEC section 6 (thesis appendix A.4 run in MATLAB): K and P of the thesis design
 K_SPEC = np.array([[17.7318, 0.0, 54.0771, 0.0], [0.0, 0.148116, 0.0, 2.41781]])

@@ -80,7 +80,7 @@ def test_hedging_slows_the_reference_model(udrone, thesis):
     nav = np.zeros(12)
     ref = np.array([0.0, 0.0, 0.5, 0.0])
     tau = np.zeros(4)
-    for k in range(20):
+    for _ in range(20):
         mrac._mrac_step(base, 0.0, nav, ref, tau)
         mrac._mrac_actuated(base, 0.0, tau, tau)
         mrac._mrac_step(hedged, 0.0, nav, ref, tau)

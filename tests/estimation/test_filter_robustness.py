@@ -4,14 +4,12 @@ bounded, explained behaviour; and a seeded mutation fuzzer finds no traceback.""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
 from rovlab.estimation.kalman import DepthHeadingFilter, StreamingFilter, plan_steps, steps_between
 from rovlab.interfaces.cli import main
-from rovlab.io.logs import read_log, write_csv
+from rovlab.io.logs import read_log
 from rovlab.params.design import packaged_config_path
 
 HEADER = "time_s,tau_Z,tau_N,z_qualisys,z_pressure,psi_qualisys"

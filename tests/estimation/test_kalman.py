@@ -11,7 +11,13 @@ import pytest
 
 from rovlab.estimation.fusion import CFG_R, N_CH, REP_R
 from rovlab.estimation.kalman import (
-    FLAG_INPUT, FLAG_TIME, Belief, DepthHeadingFilter, kf_step, kf_workspace, steps_between,
+    FLAG_INPUT,
+    FLAG_TIME,
+    Belief,
+    DepthHeadingFilter,
+    kf_step,
+    kf_workspace,
+    steps_between,
 )
 from rovlab.estimation.model import build_filter_model
 from rovlab.params.design import load_design_config

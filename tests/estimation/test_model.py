@@ -9,7 +9,10 @@ import pytest
 
 from rovlab.estimation.model import build_filter_model, observability
 from rovlab.params.design import (
-    check_design_config_file, design_config_from_dict, load_design_config, packaged_config_names,
+    check_design_config_file,
+    design_config_from_dict,
+    load_design_config,
+    packaged_config_names,
     packaged_config_path,
 )
 from rovlab.params.validate import ConfigError, read_toml
@@ -173,9 +176,9 @@ def test_sensor_management_settings_that_destabilise_the_loop_are_refused():
 def test_start_up_phase_from_the_design():
     # the Riccati recursion from P0 converges in about a second for the thesis design (P0 = 0), and
     # the steady-state error dynamics have a time constant of 0.3 s: 1.1 s + 5 x 0.3 s
-    from rovlab.estimation.model import startup_time
-
     from scipy.linalg import solve_discrete_are
+
+    from rovlab.estimation.model import startup_time
 
     m = build_filter_model(load_vehicle("udrone"), load_design_config("thesis"))
     assert all(c.startup_s == pytest.approx(2.59, abs=0.01) for c in m.channels)

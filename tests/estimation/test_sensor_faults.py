@@ -39,7 +39,7 @@ def make_log(model, seed):
         X[k] = x
         x = model.Phi @ x + model.Delta @ u[k] + L @ rng.standard_normal(6)
     cols = {"time_s": t, "tau_Z": u[:, 0], "tau_N": u[:, 1]}
-    for j, c in enumerate(model.channels):  # raw readings: the lever arm is undone by the filter
+    for c in model.channels:  # raw readings: the lever arm is undone by the filter
         cols[c.column] = X[:, c.state_index] + c.offset + math.sqrt(c.variance) * rng.standard_normal(N)
     cols["psi_qualisys"] = np.remainder(cols["psi_qualisys"] + np.pi, 2 * np.pi) - np.pi
     return X, cols
@@ -68,7 +68,7 @@ def test_100_sigma_outliers_are_rejected_without_a_trace(tmp_path, capsys, model
     missing = {k: v.copy() for k, v in cols.items()}
     # isolated 100-sigma outliers on every channel, both signs, after the start-up phase
     hits = {"z_qualisys": (80, 230, 410), "z_pressure": (120, 300, 480), "psi_qualisys": (150, 350, 520)}
-    for j, c in enumerate(model.channels):
+    for c in model.channels:
         sigma = math.sqrt(c.variance)
         for i, k in enumerate(hits[c.column]):
             spiked[c.column][k] += (100.0 if i % 2 == 0 else -100.0) * sigma

@@ -8,8 +8,14 @@ from importlib import resources
 import pytest
 
 from rovlab.ident import IdentificationError
-from rovlab.ident.added_mass import (added_mass_dnv, added_mass_edits, added_mass_from_vehicle, prism_CA, rect_CA,
-                                     rect_beta)
+from rovlab.ident.added_mass import (
+    added_mass_dnv,
+    added_mass_edits,
+    added_mass_from_vehicle,
+    prism_CA,
+    rect_beta,
+    rect_CA,
+)
 
 # uDrone's CAD geometry, thesis table 4.2 with the plane mapping of SPEC 9.4 (SPEC section 2)
 UDRONE = dict(length=0.482, width=0.333, height=0.287, area_front=0.055915, area_side=0.102378,

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from rovlab.ident import IdentificationError, lab, thrust
-from rovlab.models.thrusters import TABLE_PWM, t200_force_table
-from rovlab.models.thrusters import t200_raw_table
+from rovlab.models.thrusters import TABLE_PWM, t200_force_table, t200_raw_table
 
 COEFS = thrust.COEFFICIENTS
 SHORT = dict(step_s=8.0)  # 41 steps of 8 s instead of 30 s keeps the tests fast

@@ -133,7 +133,7 @@ def test_chunk_writer_round_trip_atomic_and_abort(tmp_path, pyarrow, monkeypatch
 def test_round_significant_matches_printf():
     rng = np.random.default_rng(5)
     x = rng.choice([-1.0, 1.0], 5000) * rng.uniform(1.0, 10.0, 5000) * 10.0 ** rng.integers(-12, 12, 5000)
-    expect = np.array([float("%.10g" % v) for v in x])
+    expect = np.array([float(f"{v:.10g}") for v in x])
     np.testing.assert_array_equal(round_significant(x, 10), expect)
     tiny = np.array([1.2345678901234e-20, np.inf, -np.inf, 0.0])  # beyond 1e+-22 scale: kept as they are
     np.testing.assert_array_equal(round_significant(tiny, 10), tiny)

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from rovlab.models.discretise import discretise, van_loan, zoh
 from rovlab.estimation.model import build_filter_model
+from rovlab.models.discretise import discretise, van_loan, zoh
 from rovlab.params.design import load_design_config
 from rovlab.params.vehicle import load_vehicle
 

@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 from rovlab.estimation.fusion import (
-    REASON_GATE, REASON_STUCK, REASON_TIMEOUT, STATUS_LOST, STATUS_OK, STATUS_RECOVERING, code_label, status_code,
+    REASON_GATE,
+    REASON_STUCK,
+    REASON_TIMEOUT,
+    STATUS_LOST,
+    STATUS_OK,
+    STATUS_RECOVERING,
+    code_label,
+    status_code,
 )
 from rovlab.params.design import design_config_from_dict, packaged_config_path
 from rovlab.params.validate import read_toml
@@ -54,7 +61,6 @@ def test_drift_during_the_dropout_is_wrapped():
 
 def test_recovery_kick_measures_psi_r_and_tau_n_after_the_return():
     c = columns()
-    t = c["time_s"]
     ret = 40.0
     k = int(round(ret / H))
     c["true_psi"][:] = 0.3

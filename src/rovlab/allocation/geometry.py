@@ -7,7 +7,7 @@ tau_6 = B f for thruster forces f (Fossen 2011, sec. 12.3).
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -13,8 +13,21 @@ from __future__ import annotations
 import numpy as np
 
 from rovlab.allocation.lexicographic import (  # noqa: F401  (the compiled copies resolve these names here)
-    _DEGENERATE_BEFORE_BLAND, _DIR_TOL, _DUAL_TOL, _FIXED, _FREE, _INEQ, _NULL_TOL, _fix_coordinate,
-    _is_bound_of, _lp_stage, _pivot, _solve_small, least_distance, lexicographic_allocate, null_basis,
+    _DEGENERATE_BEFORE_BLAND,
+    _DIR_TOL,
+    _DUAL_TOL,
+    _FIXED,
+    _FREE,
+    _INEQ,
+    _NULL_TOL,
+    _fix_coordinate,
+    _is_bound_of,
+    _lp_stage,
+    _pivot,
+    _solve_small,
+    least_distance,
+    lexicographic_allocate,
+    null_basis,
 )
 
 _TOL = 1e-9

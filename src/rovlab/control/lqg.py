@@ -54,7 +54,7 @@ class LQGController:
     P: np.ndarray  # 2 x 2
 
     @classmethod
-    def from_design(cls, design: LQRDesign) -> "LQGController":
+    def from_design(cls, design: LQRDesign) -> LQGController:
         return cls(K=np.ascontiguousarray(design.K), P=np.ascontiguousarray(design.P))
 
     def tau(self, x_hat: np.ndarray, ref: np.ndarray) -> np.ndarray:

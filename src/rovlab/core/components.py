@@ -42,8 +42,9 @@ those and nothing else, and is cached on disk per combination.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from numba.core import types

@@ -64,17 +64,38 @@ saved and restored, and ``run(t, u, y)`` for a whole log (one call of kf_run).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 from numba import njit
 from numpy.lib.stride_tricks import as_strided
 
 from rovlab.estimation.fusion import (
-    CFG_ANGLE, CFG_R, CFG_STATE, CH_MODE, CH_REASON, CH_STATUS, EVENT_NAMES, MODE_AUTO, MODE_NAMES, MODE_OFF, MODE_ON, N_CFG,
-    N_CH, N_REP, REP_EVENT, REP_INNOV, REP_R, REP_S, STATUS_LOST, STATUS_NAMES, manage_channels,
-    new_channel_state, status_label, wrap_angle,
+    CFG_ANGLE,
+    CFG_R,
+    CFG_STATE,
+    CH_MODE,
+    CH_REASON,
+    CH_STATUS,
+    EVENT_NAMES,
+    MODE_AUTO,
+    MODE_NAMES,
+    MODE_OFF,
+    MODE_ON,
+    N_CFG,
+    N_CH,
+    N_REP,
+    REP_EVENT,
+    REP_INNOV,
+    REP_R,
+    REP_S,
+    STATUS_LOST,
+    STATUS_NAMES,
+    manage_channels,
+    new_channel_state,
+    status_label,
+    wrap_angle,
 )
 from rovlab.estimation.model import FilterModel
 
@@ -435,7 +456,7 @@ class Belief:
     data: np.ndarray  # do not modify in place
 
     @staticmethod
-    def make(x: np.ndarray, P: np.ndarray, channels: np.ndarray, t: float = math.nan) -> "Belief":
+    def make(x: np.ndarray, P: np.ndarray, channels: np.ndarray, t: float = math.nan) -> Belief:
         x = np.asarray(x, dtype=float).ravel()
         n = x.size
         P = np.asarray(P, dtype=float)
@@ -479,7 +500,7 @@ class Belief:
                 "channels": self.channels.tolist()}
 
     @staticmethod
-    def from_dict(d: Mapping) -> "Belief":
+    def from_dict(d: Mapping) -> Belief:
         return Belief.make(np.array(d["x"], dtype=float), np.array(d["P"], dtype=float),
                            np.array(d["channels"], dtype=float), float(d.get("t", math.nan)))
 
@@ -605,7 +626,7 @@ class DepthHeadingFilter:
         self._out_size = _out_size(self.n, self.m)
 
     @classmethod
-    def from_files(cls, vehicle: str = "udrone", config: str = "default") -> "DepthHeadingFilter":
+    def from_files(cls, vehicle: str = "udrone", config: str = "default") -> DepthHeadingFilter:
         from rovlab.estimation.model import build_filter_model
         from rovlab.params.design import load_design_config
         from rovlab.params.vehicle import load_vehicle
@@ -839,7 +860,7 @@ class StreamingFilter:
     * a non-finite input repeats the previous finite one (zero-order hold), across chunks.
     """
 
-    def __init__(self, filt: "DepthHeadingFilter", *, max_gap_steps: int = MAX_GAP_STEPS,
+    def __init__(self, filt: DepthHeadingFilter, *, max_gap_steps: int = MAX_GAP_STEPS,
                  tolerance: float = 0.25) -> None:
         self.filt = filt
         self.h = filt.model.h

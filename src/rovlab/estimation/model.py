@@ -101,8 +101,20 @@ class FilterModel:
         """The m x N_CFG array the compiled kernels read (see rovlab.estimation.fusion)."""
         # imported here: fusion imports numba, which ``rovlab design`` does not need
         from rovlab.estimation.fusion import (
-            CFG_ANGLE, CFG_GATE, CFG_LOSE_AFTER, CFG_OFFSET, CFG_R, CFG_RAMP_N, CFG_RAMP_TIME, CFG_REACQUIRE,
-            CFG_STARTUP, CFG_STATE, CFG_STUCK_BOUND, CFG_STUCK_N, CFG_TIMEOUT, N_CFG,
+            CFG_ANGLE,
+            CFG_GATE,
+            CFG_LOSE_AFTER,
+            CFG_OFFSET,
+            CFG_R,
+            CFG_RAMP_N,
+            CFG_RAMP_TIME,
+            CFG_REACQUIRE,
+            CFG_STARTUP,
+            CFG_STATE,
+            CFG_STUCK_BOUND,
+            CFG_STUCK_N,
+            CFG_TIMEOUT,
+            N_CFG,
         )
 
         cfg = np.zeros((len(self.channels), N_CFG))

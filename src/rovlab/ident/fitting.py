@@ -7,8 +7,8 @@ residuals and so are optimistic when the residuals are correlated (model error).
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 import numpy as np
 

@@ -28,9 +28,10 @@ Rigs (defaults follow the thesis; every duration is configurable so tests run sh
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -185,7 +186,8 @@ def thrust_rig(vehicle: Vehicle, thrusters: Sequence[str] | str | None = None, *
     if thr.model == "quadratic" and thr.curve is not None:
         truth = {"K_L_pos": thr.curve.K_L_pos, "K_NL_pos": thr.curve.K_NL_pos, "K_L_neg": thr.curve.K_L_neg,
                  "K_NL_neg": thr.curve.K_NL_neg, "deadband_us": thr.deadband_us}
-    notes: tuple[str, ...] = () if truth else (f"{thr.name} is tabulated ({thr.table} at {thr.voltage:g} V): the truth is the table, "
+    notes: tuple[str, ...] = () if truth else (f"{thr.name} is tabulated ({thr.table} at {thr.voltage:g} V): "
+                                               "the truth is the table, "
                               "not a quadratic curve",)
     if len(names) > 1:
         notes += (f"{len(names)} thrusters on the rig together ({', '.join(names)}): identify with --pair {len(names)}",)
@@ -460,7 +462,8 @@ def relay_test(vehicle: Vehicle, dof: str = "surge", *, seed: int | None = None,
                                           "equivalent linearisation (biased added mass and damping)",))
     return LabData("step", cols, truth, {"dof": dof, "force": force, "amplitude": amplitude,
                                          "duration_s": duration_s, "rate_hz": rate, "linear": linear,
-                                         "position_variance": var, "trim": trim, "buoyancy_error_n": buoyancy_error_n}, seed, vehicle.name, {}, notes)
+                                         "position_variance": var, "trim": trim, "buoyancy_error_n": buoyancy_error_n},
+                   seed, vehicle.name, {}, notes)
 
 
 # --------------------------------------------------------------------------------------------

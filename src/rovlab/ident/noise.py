@@ -20,9 +20,10 @@ channel as ``<sensor>.<channel>`` (``pressure.z``) or ``<channel>_<sensor>`` (``
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 

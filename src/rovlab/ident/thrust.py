@@ -19,14 +19,15 @@ Static tables: ``pwm_us, force_n``, or the maker's CSV (``PWM (µs)``, ``Force (
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from rovlab.ident.fitting import IdentificationError, covariance_from_jacobian, lowpass, sample_rate
-from rovlab.io.tables import require_increasing, DataTable, read_table
+from rovlab.io.tables import DataTable, read_table, require_increasing
 from rovlab.params.vehicle import QuadraticCurve
 
 KGF = 9.80665  # N per kilogram-force

@@ -18,14 +18,23 @@ Columns: ``run, time_s, speed_mps, force_n`` for the vehicle runs and the rig ru
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
-from rovlab.ident.fitting import (DAMPING_TERMS, IdentificationError, LinearFit, check_terms, damping_regressors,
-                                  fit_damping, linear_lsq, significant)
+from rovlab.ident.fitting import (
+    DAMPING_TERMS,
+    IdentificationError,
+    LinearFit,
+    check_terms,
+    damping_regressors,
+    fit_damping,
+    linear_lsq,
+    significant,
+)
 from rovlab.ident.steady import mean_with_stderr, plateau_window, rest_samples
 from rovlab.io.tables import DataTable, read_table, require_increasing, split_runs
 

@@ -15,8 +15,8 @@ Columns: ``run, time_s, moment_nm, heading_rad`` (heading may be wrapped to (-pi
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 

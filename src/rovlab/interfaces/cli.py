@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from typing import Sequence
+from collections.abc import Sequence
 
 # Modules providing sub-commands: each has register(subparsers) -> None.
 _COMMAND_MODULES = (

@@ -27,7 +27,8 @@ def run_comparison(scenario: str, controllers: list[str], runs: int, seed: int |
                    figure: bool = True, quiet: bool = False) -> tuple[dict[str, Any], Path, list[str]]:
     """Run, write DIR/comparison.json, comparison.txt and comparison.png; returns (comparison, DIR, notes)."""
     from rovlab.interfaces.cli import UserError
-    from rovlab.sim.compare import compare, figure as draw, table
+    from rovlab.sim.compare import compare, table
+    from rovlab.sim.compare import figure as draw
     from rovlab.sim.components import CONTROLLERS
     from rovlab.sim.montecarlo import Progress
     from rovlab.sim.output import write_json

@@ -154,7 +154,13 @@ def _check_initial(config, model) -> None:
 
 def _cmd_filter(args: argparse.Namespace) -> int:
     from rovlab.estimation.fusion import (
-        EVENT_NONFINITE, EVENT_REJECTED, EVENT_USED, REASON_NAMES, STATUS_LOST, STATUS_NAMES, status_label,
+        EVENT_NONFINITE,
+        EVENT_REJECTED,
+        EVENT_USED,
+        REASON_NAMES,
+        STATUS_LOST,
+        STATUS_NAMES,
+        status_label,
     )
     from rovlab.estimation.kalman import DepthHeadingFilter, IntervalError, StreamingFilter
     from rovlab.interfaces.cli import UserError

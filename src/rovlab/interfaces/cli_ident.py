@@ -17,8 +17,9 @@ import json
 import math
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 SIGN_NOTE = ("Coefficients use SNAME signs: added mass and damping derivatives are negative "
              "(X_udot = -5.5 means 5.5 kg of added mass).")
@@ -604,8 +605,8 @@ def _cmd_added_mass(args: argparse.Namespace) -> int:
         if missing:
             raise _user_error("added-mass needs " + ", ".join(missing) + " (or --vehicle NAME to use its geometry)")
         rho = args.rho if args.rho is not None else 1000.0
-    est = _run("added-mass", lambda: added_mass.added_mass_dnv(**dims, rho=rho))  # type: ignore[arg-type]
-    if max(dims["length"], dims["width"], dims["height"]) > 20.0:  # type: ignore[type-var]
+    est = _run("added-mass", lambda: added_mass.added_mass_dnv(**dims, rho=rho))
+    if max(dims["length"], dims["width"], dims["height"]) > 20.0:
         print(f"rovlab: note: the dimensions are read in metres (L, W, H = {dims['length']:g}, {dims['width']:g}, "
               f"{dims['height']:g} m) and the areas in m^2; were they given in millimetres?", file=sys.stderr)
     png = None

@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 
-
 def register(sub: argparse._SubParsersAction) -> None:
     sim = sub.add_parser("simulate", help="run a closed-loop scenario (packaged name or TOML file)")
     sim.add_argument("scenario", help="packaged scenario name or TOML path (rovlab scenarios lists them)")

@@ -18,11 +18,11 @@ import csv
 import io
 import math
 import os
-import re
 import sys
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any, Iterable, Iterator, Mapping, Sequence
+from typing import IO, Any
 
 import numpy as np
 
@@ -91,6 +91,7 @@ def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
 
     need = [time_column] + [c for c in required if c != time_column]
     _check_header(file, header, header_line, need)
+    assert header is not None  # _check_header refuses a file without one
     if not rows:
         raise ConfigError([Problem(file, "", "no data rows", "at least one row after the header")], "log")
 
@@ -132,7 +133,7 @@ def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
             break
     if len(problems) < _MAX_PROBLEMS:
         t = values[:, it]  # NaN where the time itself was bad (already reported)
-        for r in np.flatnonzero(np.diff(t) <= 0) + 1:
+        for r in (np.flatnonzero(np.diff(t) <= 0) + 1).tolist():
             what = "repeats" if t[r] == t[r - 1] else "goes back from"
             problems.append(Problem(file, f"line {row_lines[r]}, column {time_column!r}", float(t[r]),
                                     f"strictly increasing times (it {what} {float(t[r - 1])!r} on line "
@@ -632,7 +633,7 @@ class ChunkWriter:
         self._tmp.unlink(missing_ok=True)
         self._tmp = None
 
-    def __enter__(self) -> "ChunkWriter":
+    def __enter__(self) -> ChunkWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
@@ -649,7 +650,8 @@ def write_csv(target: str | Path | IO[str], columns: Mapping[str, Sequence | np.
 
     Numbers are written exactly (shortest round-trip form) unless ``float_format`` (e.g.
     ``"%.6g"``) is given; the ``exact`` columns (e.g. ``("time_s",)``) are always written exactly, so
-    that ``%.10g`` does not turn epoch time stamps (1.7e9 s) into whole seconds. NaN is written as an empty cell ("no value"), so what this writes
+    that ``%.10g`` does not turn epoch time stamps (1.7e9 s) into whole seconds. NaN is written as an
+    empty cell ("no value"), so what this writes
     :func:`read_log` reads back unchanged. A file is written atomically (temporary file, then
     rename) so a crash never leaves half a log.
     """
@@ -684,7 +686,7 @@ def write_csv(target: str | Path | IO[str], columns: Mapping[str, Sequence | np.
         buf.write("\n")
     text = buf.getvalue()
     if hasattr(target, "write"):
-        target.write(text)  # type: ignore[union-attr]
+        target.write(text)
         return
     if str(target) == "-":
         sys.stdout.write(text)

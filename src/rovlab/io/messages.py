@@ -13,7 +13,8 @@ e.g. MRAC's adapted parameters) travels with the command as ``controller``.
 from __future__ import annotations
 
 import math
-from typing import Any, Iterator, Mapping
+from collections.abc import Iterator, Mapping
+from typing import Any
 
 import numpy as np
 

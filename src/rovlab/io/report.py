@@ -12,8 +12,9 @@ import base64
 import html
 import json
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -282,7 +283,7 @@ def summary_rows(metrics: Mapping[str, Any]) -> list[tuple[str, str]]:
     for s, unit, k in (("z", "m", 1.0), ("psi", "deg", _DEG), ("w", "m/s", 1.0), ("r", "deg/s", _DEG)):
         if s in rms:
             rows.append((f"RMS estimation error {s} [{unit}]", _fmt(rms[s] * k)))
-    for axis, unit, k in (("z", "s", 1.0), ("psi", "s", 1.0)):
+    for axis, unit, _k in (("z", "s", 1.0), ("psi", "s", 1.0)):
         st = metrics.get("settling_time_s", {}).get(axis)
         rows.append((f"settling time {axis} [{unit}] (2 %)", _fmt(st)))
     for axis in ("z", "psi"):

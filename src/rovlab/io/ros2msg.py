@@ -12,7 +12,8 @@ converted here; a ROS bridge that publishes ENU/FLU converts at its edge.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 WORLD_FRAME = "map_ned"
 BODY_FRAME = "base_link_frd"

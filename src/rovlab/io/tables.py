@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -58,7 +58,8 @@ def column_limit(name: str) -> float:
     return DEFAULT_LIMIT
 
 
-# A number in a log (rovlab filter; io/logs.py), as C, CSV readers and spreadsheets write one: ASCII digits, optional sign, point and
+# A number in a log (rovlab filter; io/logs.py), as C, CSV readers and spreadsheets write one: ASCII digits,
+# optional sign, point and
 # exponent, or inf/infinity. Python's float() also takes '1_000' and non-ASCII digits ('１２'),
 # which no other tool reads as numbers: such cells are refused.
 _LOG_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:inf|infinity))")
@@ -119,7 +120,7 @@ class DataTable:
         """A :class:`ConfigError` pointing at one row (index into the arrays) and column."""
         return ConfigError([Problem(self.file, _where(self, row, column), value, expected)], "data file")
 
-    def select(self, mask: np.ndarray) -> "DataTable":
+    def select(self, mask: np.ndarray) -> DataTable:
         """The rows where ``mask`` is true (same columns, same file)."""
         mask = np.asarray(mask, dtype=bool)
         return DataTable(self.file, self.columns, {k: v[mask] for k, v in self.data.items()},

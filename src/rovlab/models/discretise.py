@@ -15,7 +15,8 @@ Q comes from Van Loan's method (Van Loan 1978, IEEE TAC 23(3); Brown & Hwang 201
 
 Gamma = int_0^h e^{A s} ds E is what MATLAB's ``c2d(A, E, h)`` returns (the thesis reports it);
 the filter does not need it: Q above is already the covariance of the discrete state noise
-(rovlab's correction of the thesis, whose eq. in sec. 5.1.2 writes Gamma Q Gamma^T: predict with Phi P Phi^T + Q, not Gamma Q Gamma^T).
+(rovlab's correction of the thesis, whose eq. in sec. 5.1.2 writes Gamma Q Gamma^T: predict with
+Phi P Phi^T + Q, not Gamma Q Gamma^T).
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ class HeaveYawParams:
     N_r: float  # linear yaw damping (<= 0) [N m s/rad]
 
     @classmethod
-    def from_vehicle(cls, vehicle: Vehicle) -> "HeaveYawParams":
+    def from_vehicle(cls, vehicle: Vehicle) -> HeaveYawParams:
         return cls(
             M_w=vehicle.mass - float(vehicle.added_mass[2]),
             M_r=vehicle.I_zz - float(vehicle.added_mass[3]),
@@ -40,7 +40,7 @@ class HeaveYawParams:
 
     @classmethod
     def from_values(cls, *, m: float, I_zz: float, Z_wdot: float, N_rdot: float, Z_w: float,
-                    N_r: float) -> "HeaveYawParams":
+                    N_r: float) -> HeaveYawParams:
         return cls(M_w=m - Z_wdot, M_r=I_zz - N_rdot, Z_w=Z_w, N_r=N_r)
 
 

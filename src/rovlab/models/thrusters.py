@@ -27,7 +27,17 @@ import numpy as np
 from rovlab._jit import LazyKernels
 from rovlab.models import thruster_kernels as _plain
 from rovlab.models.thruster_kernels import (  # noqa: F401  (re-exported: the row layout)
-    K_DEAD, K_KIND, K_KLN, K_KLP, K_KNLN, K_KNLP, K_NEUTRAL, K_PMAX, K_PMIN, KIND_QUADRATIC, KIND_TABLE,
+    K_DEAD,
+    K_KIND,
+    K_KLN,
+    K_KLP,
+    K_KNLN,
+    K_KNLP,
+    K_NEUTRAL,
+    K_PMAX,
+    K_PMIN,
+    KIND_QUADRATIC,
+    KIND_TABLE,
     ZERO_FORCE,
 )
 from rovlab.params.vehicle import Thruster, Vehicle
@@ -37,7 +47,7 @@ TABLE_VOLTAGES = (10, 12, 14, 16, 18, 20)
 TABLE_PWM = np.arange(1100.0, 1900.0 + 1e-9, 4.0)  # the maker's grid [us]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def t200_raw_table(voltage: int) -> tuple[np.ndarray, np.ndarray]:
     """(pwm_us, force_N) of the maker's table at one of the tabulated voltages."""
     if voltage not in TABLE_VOLTAGES:
@@ -96,11 +106,11 @@ class ThrusterBank:
     f_max: np.ndarray  # most positive thrust each can give [N]
 
     @classmethod
-    def from_vehicle(cls, vehicle: Vehicle) -> "ThrusterBank":
+    def from_vehicle(cls, vehicle: Vehicle) -> ThrusterBank:
         return cls.from_thrusters(vehicle.thrusters)
 
     @classmethod
-    def from_thrusters(cls, thrusters: tuple[Thruster, ...] | list[Thruster]) -> "ThrusterBank":
+    def from_thrusters(cls, thrusters: tuple[Thruster, ...] | list[Thruster]) -> ThrusterBank:
         n = len(thrusters)
         rows = np.zeros((n, 9))
         grid_force = np.zeros((n, TABLE_PWM.size))

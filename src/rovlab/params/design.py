@@ -88,9 +88,10 @@ This module only reads and checks the file; the maths lives in ``rovlab.estimati
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 

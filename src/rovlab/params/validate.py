@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import math
 import tomllib
-from importlib import resources
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -310,7 +311,7 @@ class TableReader:
         return out
 
     # -- structure ------------------------------------------------------------------------
-    def table(self, name: str, *, required: bool = True) -> "TableReader":
+    def table(self, name: str, *, required: bool = True) -> TableReader:
         value = self._get(name, required)
         if value is _MISSING:
             return TableReader({}, self.collector, self.key(name))
@@ -319,7 +320,7 @@ class TableReader:
             return TableReader({}, self.collector, self.key(name))
         return TableReader(value, self.collector, self.key(name))
 
-    def tables(self, name: str, *, required: bool = True, min_count: int = 0) -> list["TableReader"]:
+    def tables(self, name: str, *, required: bool = True, min_count: int = 0) -> list[TableReader]:
         """An array of tables (``[[name]]``)."""
         value = self._get(name, required)
         if value is _MISSING:

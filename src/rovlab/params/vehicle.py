@@ -8,14 +8,22 @@ and docs/vehicle-file.md for the file format.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
-from rovlab.params.validate import (Collector, ConfigError, PackagedFiles, Problem, TableReader,
-                                    plausible_expectation, read_toml)
+from rovlab.params.validate import (
+    Collector,
+    ConfigError,
+    PackagedFiles,
+    Problem,
+    TableReader,
+    plausible_expectation,
+    read_toml,
+)
 
 DOF4 = ("surge", "sway", "heave", "yaw")
 WRENCH6 = ("X", "Y", "Z", "K", "M", "N")
@@ -163,7 +171,7 @@ class Vehicle:
         names = ", ".join(s.name for s in self.sensors) or "none"
         raise KeyError(f"vehicle {self.name!r} has no sensor {name!r}; it has {names}")
 
-    def with_updates(self, **changes: Any) -> "Vehicle":
+    def with_updates(self, **changes: Any) -> Vehicle:
         """A copy with some fields replaced (arrays are copied and frozen)."""
         fixed: dict[str, Any] = {
             k: _frozen(v) if isinstance(v, (list, tuple, np.ndarray)) and k not in ("thrusters", "sensors") else v

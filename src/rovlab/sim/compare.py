@@ -27,8 +27,9 @@ true initial depth, at rest), the same yardstick for every controller, adaptive 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 

@@ -8,7 +8,7 @@ them with ``estimator = "<name>"`` and ``controller = "<name>"``.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from rovlab.control import lqg, mrac
 from rovlab.core.components import ControllerSpec, EstimatorSpec

@@ -32,7 +32,14 @@ from numba import njit
 
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
-    N_TRUTH, TRUTH_INDEX, controller_actuated, controller_step, estimator_correct, estimator_predict, plant_advance, plant_truth,
+    N_TRUTH,
+    TRUTH_INDEX,
+    controller_actuated,
+    controller_step,
+    estimator_correct,
+    estimator_predict,
+    plant_advance,
+    plant_truth,
 )
 from rovlab.estimation.fusion import CH_REASON, CH_STATUS, EVENT_USED, N_REP, REP_EVENT, REP_INNOV, REP_S
 from rovlab.models.sensors import sample_sensors

@@ -13,8 +13,9 @@ import multiprocessing as mp
 import os
 import sys
 import time
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 

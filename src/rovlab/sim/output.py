@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
-from rovlab.io.report import write_figures, write_nees_figure, write_report_html
 from rovlab.io.logs import write_csv
+from rovlab.io.report import write_figures, write_nees_figure, write_report_html
 from rovlab.io.timeseries import write_mcap
 from rovlab.sim.runner import SimResult
 

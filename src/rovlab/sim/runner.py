@@ -15,16 +15,20 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 
 from rovlab.allocation.solvers import Allocator
 from rovlab.core.components import (
+    TRUTH_INDEX,
+    ControllerSpec,
+    EstimatorSpec,
+    fresh,
     plant_draws,
-    TRUTH_INDEX, ControllerSpec, EstimatorSpec, fresh,
 )
 from rovlab.models import kinetics as kin
 from rovlab.models.discretise import discretise
@@ -40,7 +44,6 @@ from rovlab.sim.components import build_pair
 from rovlab.sim.loop import Drive, Logs, draw, new_logs, run_loop
 from rovlab.sim.plant import ObserverPlant, ProcessPlant
 from rovlab.sim.scenario import Scenario, scenario_from_dict
-
 
 # --------------------------------------------------------------------------------------------
 # Designs (shared by runs)

@@ -61,15 +61,16 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from rovlab.params.design import load_design_config
-from rovlab.params.vehicle import PLAUSIBLE, load_vehicle
 from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
+from rovlab.params.vehicle import PLAUSIBLE, load_vehicle
 
 _DEG = math.pi / 180.0
 DOF_NAMES = ("surge", "sway", "heave", "yaw")

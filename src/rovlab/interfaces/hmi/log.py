@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from rovlab.io.messages import SENSOR_STATUS
 from rovlab.core.files import atomic_write_text
 from rovlab.io.logs import write_csv
+from rovlab.io.messages import SENSOR_STATUS
 from rovlab.io.timeseries import write_mcap
 
 _STATUS_CODE = {name: float(code) for code, name in SENSOR_STATUS.items()}
