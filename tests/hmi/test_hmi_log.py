@@ -54,3 +54,20 @@ def test_a_channel_that_appears_later_is_backfilled_with_no_values(tmp_path):
     cols = log.run.arrays()
     assert np.isnan(cols["meas_z_b"][0]) and cols["meas_z_b"][1] == 5.0
     assert list(cols) == ["time_s", "meas_z_a", "meas_z_b"]
+
+
+def test_the_session_log_has_the_columns_order_and_words_of_timeseries_csv(tmp_path, sim_rows):
+    """Issue 15: the HMI's session log and a simulation's timeseries.csv are the same table."""
+    from rovlab.io.messages import order_columns
+    from rovlab.sim.runner import simulate
+
+    messages, _ = sim_rows
+    log = SessionLog(tmp_path, stem="s")
+    log.add(messages)
+    (csv,) = [p for p in log.write(["csv"]) if p.suffix == ".csv"]
+    header = csv.read_text(encoding="utf-8").splitlines()[0].split(",")
+    batch = list(order_columns(simulate("step-process-model").columns))
+    assert header == [c for c in batch if c in header]  # same relative order
+    assert set(batch) - set(header) <= {c for c in batch if c.startswith("tau_") and c.endswith("_demanded")}
+    statuses = set(read_log(csv).text["status_z_qualisys"])
+    assert statuses <= {"ok", "recovering", "lost", "off"} and statuses

@@ -26,7 +26,11 @@ def test_round_trip_with_comments(tmp_path):
     assert t.columns == ("run", "time_s")
     np.testing.assert_array_equal(t["run"], [1, 1, 2])
     assert t.meta() == {"seed": "4"}
-    assert list(t.lines) == [4, 5, 6]
+    # issue 15: plain CSV that pandas reads with its defaults; the comments live in x.csv.json
+    assert "#" not in path.read_text(encoding="utf-8") and (tmp_path / "x.csv.json").exists()
+    assert list(t.lines) == [2, 3, 4]
+    pd = pytest.importorskip("pandas")
+    assert list(pd.read_csv(path).columns) == ["run", "time_s"]
     assert [rid for rid, _ in split_runs(t)] == [1, 2]
 
 

@@ -166,3 +166,18 @@ def test_an_interrupted_monte_carlo_keeps_its_finished_runs():
 
     out = run_many(data, file, [0, 1, 2, 3], workers=1, progress=progress)
     assert [r["seed"] for r in out] == [0, 1]
+
+
+def test_a_simulations_timeseries_feeds_rovlab_filter_directly(tmp_path):
+    """Issue 15: timeseries.csv (meas_<quantity>_<sensor>, tau_Z, tau_N) goes into `rovlab filter`
+    as it is, and the offline filter with the same configuration reproduces the loop's estimate."""
+    from rovlab.interfaces.cli import main
+
+    run_dir = tmp_path / "run"
+    assert main(["simulate", "step-process-model", "--out", str(run_dir), "--no-figures"]) == 0
+    est = tmp_path / "est.csv"
+    assert main(["filter", str(run_dir / "timeseries.csv"), "--config", "thesis", "--out", str(est)]) == 0
+    sim, off = read_log(run_dir / "timeseries.csv"), read_log(est)
+    np.testing.assert_allclose(off["z"], sim["est_z"], atol=1e-6)
+    np.testing.assert_allclose(off["b_w"], sim["est_b_w"], atol=1e-4)
+    assert (tmp_path / "est.csv.json").exists() and "#" not in est.read_text(encoding="utf-8")[:200]

@@ -165,6 +165,7 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     from rovlab.estimation.kalman import DepthHeadingFilter, IntervalError, StreamingFilter
     from rovlab.interfaces.cli import UserError
     from rovlab.io.logs import ChunkWriter, LogStream
+    from rovlab.io.tables import write_sidecar
 
     if args.max_gap_steps < 1:
         raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
@@ -172,7 +173,10 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     _check_initial(config, model)
     filt = DepthHeadingFilter(model)
     columns = [c.column for c in model.channels]
-    stream = LogStream(args.log, required=("time_s",) + INPUT_COLUMNS + tuple(columns))
+    # a simulation's timeseries.csv names the samples meas_<quantity>_<sensor>: read those as they are
+    header = set(LogStream(args.log, required=("time_s",)).header)
+    source = {c: f"meas_{c}" if c not in header and f"meas_{c}" in header else c for c in columns}
+    stream = LogStream(args.log, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
     runner = StreamingFilter(filt, max_gap_steps=args.max_gap_steps)
     m = len(columns)
     # status codes -> labels ('ok', 'lost-timeout', ...): code = 8 status + reason
@@ -207,8 +211,11 @@ def _cmd_filter(args: argparse.Namespace) -> int:
         writer.write(out)
         n_rows += run.t.size
 
-    try:
-        writer = ChunkWriter(args.out, names, comments=comments, significant=10, exact=("time_s",))
+    try:  # plain CSV (pandas reads it with defaults); what it is goes in a JSON sidecar
+        writer = ChunkWriter(args.out, names, significant=10, exact=("time_s",))
+        if args.out != "-":
+            write_sidecar(args.out, {"what": comments[0], "units": comments[1], "vehicle": vehicle.name,
+                                     "configuration": config.name, "sample_time_s": model.h, "log": str(args.log)})
     except OSError as exc:
         raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     with writer:
@@ -222,7 +229,7 @@ def _cmd_filter(args: argparse.Namespace) -> int:
                     t_first = float(t[0])
                 t_last = float(t[-1])
                 u = np.column_stack([chunk.data[c] for c in INPUT_COLUMNS])
-                y = np.column_stack([chunk.data[c] for c in columns])
+                y = np.column_stack([chunk.data[source[c]] for c in columns])
                 samples += np.count_nonzero(~np.isnan(y), axis=0)
                 dt = np.diff(np.concatenate([[t_prev], t]) if math.isfinite(t_prev) else t)
                 gaps += int(np.count_nonzero((dt > 1.5 * model.h) & (dt <= (args.max_gap_steps + 0.5) * model.h)))

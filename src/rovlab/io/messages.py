@@ -35,6 +35,36 @@ TOPICS: dict[str, dict[str, Any]] = {
 }
 
 
+def _rank(name: str) -> int:
+    """Group of a column in a log's order: time, truth, estimate, samples, references, commands,
+    PWM, variances, sensor status, demanded wrench, true biases, controller state, the rest."""
+    if name == "time_s":
+        return 0
+    if name.startswith("true_b_"):
+        return 10
+    if name.startswith("tau_") and name.endswith("_demanded"):
+        return 9
+    for i, prefix in enumerate(("true_", "est_", "meas_", "ref_", "tau_", "pwm_", "var_", "status_"), start=1):
+        if name.startswith(prefix):
+            return i
+    return 11 if name.startswith("ctrl_") else 12
+
+
+def order_columns(columns: Mapping[str, Any]) -> dict[str, Any]:
+    """The columns in the one order every rovlab log uses (timeseries.csv, the HMI session log),
+    stable within each group."""
+    return {k: columns[k] for k in sorted(columns, key=_rank)}
+
+
+def status_words(columns: Mapping[str, Any]) -> dict[str, Any]:
+    """The columns with ``status_*`` codes (0 ok, 1 recovering, 2 lost, 3 off) as words."""
+    out = dict(columns)
+    for k, v in columns.items():
+        if k.startswith("status_"):
+            out[k] = [SENSOR_STATUS.get(int(c), "unknown") if c == c else "" for c in np.asarray(v, dtype=float).tolist()]
+    return out
+
+
 def _clean(value: float) -> float | None:
     v = float(value)
     return None if math.isnan(v) else v

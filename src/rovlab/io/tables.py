@@ -13,11 +13,13 @@ line and the column, so that command-line tools print it without a traceback::
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -263,6 +265,10 @@ def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "d
         arr.setflags(write=False)
     lines = np.asarray(row_lines, dtype=int)
     lines.setflags(write=False)
+    if not comments:  # metadata of files rovlab writes lives in a JSON sidecar (older files: '#' lines)
+        side = read_sidecar(path).get("comments")
+        if isinstance(side, list):
+            comments = [str(c) for c in side]
     return DataTable(file, tuple(header), data, lines, tuple(comments))
 
 
@@ -280,9 +286,34 @@ def _is_number(text: str) -> bool:
     return True
 
 
+def sidecar_path(path: str | Path) -> Path:
+    """The JSON file that holds a CSV file's metadata: ``<name>.json`` beside it."""
+    path = Path(path)
+    return path.with_name(path.name + ".json")
+
+
+def write_sidecar(path: str | Path, meta: Mapping[str, Any]) -> Path:
+    """Write a CSV file's metadata as JSON beside it (CSV files stay plain RFC 4180, no comment
+    lines, so pandas and spreadsheets read them with their defaults)."""
+    target = sidecar_path(path)
+    atomic_write_text(target, json.dumps(dict(meta), indent=1, default=str) + "\n")
+    return target
+
+
+def read_sidecar(path: str | Path) -> dict[str, Any]:
+    """The metadata written by :func:`write_sidecar` ({} when there is none or it is unreadable)."""
+    try:
+        data = json.loads(sidecar_path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
 def write_table(path: str | Path, columns: Mapping[str, Iterable[float]], *,
                 comments: Sequence[str] = (), formats: Mapping[str, str] | None = None) -> Path:
-    """Write columns (all the same length) as CSV, with ``# comment`` lines first; atomic replace.
+    """Write columns (all the same length) as plain CSV (atomic replace); ``comments`` (lines
+    such as ``seed = 7``) go to the JSON sidecar (:func:`write_sidecar`, key ``comments``), where
+    :func:`read_table` finds them again.
 
     ``formats`` maps a column to a ``format()`` spec (default ``.9g``; ``d`` for integers).
     """
@@ -293,11 +324,12 @@ def write_table(path: str | Path, columns: Mapping[str, Iterable[float]], *,
     if len(sizes) > 1:
         raise ValueError(f"columns differ in length: {dict(zip(names, (a.shape[0] for a in arrays)))}")
     fmts = [(formats or {}).get(name, ".9g") for name in names]
-    lines = [f"# {c}" if c else "#" for c in comments]
-    lines.append(",".join(names))
+    lines = [",".join(names)]
     for row in zip(*arrays):
         lines.append(",".join(format(int(x) if f == "d" else float(x), f) for x, f in zip(row, fmts)))
     atomic_write_text(path, "\n".join(lines) + "\n")
+    if comments:
+        write_sidecar(path, {"comments": list(comments)})
     return path
 
 

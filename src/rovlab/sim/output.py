@@ -13,22 +13,15 @@ from typing import Any
 import numpy as np
 
 from rovlab.io.logs import write_csv
+from rovlab.io.messages import order_columns
 from rovlab.io.report import write_figures, write_nees_figure, write_report_html
 from rovlab.io.timeseries import write_mcap
 from rovlab.sim.runner import SimResult
 
-# the columns of the timeseries.csv contract come first, in this order
-CONTRACT = ("time_s", "true_z", "true_psi", "true_w", "true_r", "est_z", "est_psi", "est_w", "est_r",
-            "est_b_w", "est_b_r")
-
 
 def ordered_columns(result: SimResult) -> dict[str, np.ndarray]:
-    c = result.columns
-    first = [k for k in CONTRACT if k in c]
-    meas = [k for k in c if k.startswith("meas_")]
-    rest_contract = ["ref_z", "ref_psi", "tau_Z", "tau_N"] + [k for k in c if k.startswith("pwm_")]
-    others = [k for k in c if k not in first + meas + rest_contract]
-    return {k: c[k] for k in first + meas + rest_contract + others}
+    """timeseries.csv's columns in the order every rovlab log uses (rovlab.io.messages)."""
+    return order_columns(result.columns)
 
 
 def _json_default(o: Any) -> Any:

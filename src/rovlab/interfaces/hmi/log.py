@@ -22,7 +22,7 @@ import numpy as np
 
 from rovlab.core.files import atomic_write_text
 from rovlab.io.logs import write_csv
-from rovlab.io.messages import SENSOR_STATUS
+from rovlab.io.messages import SENSOR_STATUS, order_columns, status_words
 from rovlab.io.timeseries import write_mcap
 
 _STATUS_CODE = {name: float(code) for code, name in SENSOR_STATUS.items()}
@@ -153,11 +153,11 @@ class SessionLog:
         nonempty = [(i, r) for i, r in enumerate(self.runs, 1) if len(r)]
         for i, run in nonempty:
             name = self.stem if len(nonempty) == 1 and i == 1 else f"{self.stem}-run{i}"
-            cols = run.arrays()
+            cols = order_columns(run.arrays())  # the order and words of timeseries.csv
             for fmt in formats:
                 path = self.folder / f"{name}.{fmt}"
                 if fmt == "csv":
-                    write_csv(path, cols, exact=("time_s",))
+                    write_csv(path, status_words(cols), exact=("time_s",))
                     written.append(path)
                 elif fmt == "mcap":
                     meta = {"run": str(i), **(metadata or {})}
