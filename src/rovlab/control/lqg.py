@@ -1,11 +1,11 @@
-"""The LQG control law and the thruster mapping behind it (SPEC sections 3 and 6).
+"""The LQG control law and the thruster mapping behind it (Sandøy 2016, ch. 2 and sec. 5.2).
 
 With the Kalman estimate x_hat = [z, psi, w, r, b_w, b_r] and references r = [z_ref, psi_ref]:
 
     tau = P r - K [z, psi', w, r] - [b_w, b_r]
 
 * the bias estimate is **subtracted**: in the model the bias enters like a force
-  (M nu_dot = ... + tau + b), so tau = ... - b_hat cancels it (SPEC section 11: the thesis's
+  (M nu_dot = ... + tau + b), so tau = ... - b_hat cancels it (rovlab's correction of the thesis: its
   eq. 5.29 adds it);
 * the heading error is wrapped: psi' = psi_ref - wrap(psi_ref - psi_hat) is the heading
   equivalent to psi_hat (modulo 2 pi) nearest to the reference, so a vehicle at 179 deg told to

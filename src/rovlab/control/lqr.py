@@ -1,4 +1,4 @@
-"""Discrete LQR for depth and heading, Bryson's rule and the reference feed-forward (SPEC section 6).
+"""Discrete LQR for depth and heading, Bryson's rule and the reference feed-forward (Sandøy 2016, sec. 5.2).
 
 Control model (the observer model without bias states): x = [z, psi, w, r], u = [Z, N],
 
@@ -19,7 +19,7 @@ Reference feed-forward P so that the output settles on the reference r (u = P r 
 
 For this model both give the same P (= the position block of K, since z and psi are pure
 integrators: at rest the thrust must vanish, so P r = K x); they differ for plants without
-integrators. The thesis's reported K and P (SPEC section 6) are reproduced either way.
+integrators. The thesis's reported K and P (Sandøy 2016, sec. 5.2) are reproduced either way.
 Bryson's rule (Bryson & Ho 1975, sec. 5.4): Q_ii = w_i / x_max,i^2, R_jj = w_j / u_max,j^2.
 """
 

@@ -1,6 +1,6 @@
-"""Model-reference adaptive heave control (MRAC); heading stays on its LQR (SPEC section 6).
+"""Model-reference adaptive heave control (MRAC); heading stays on its LQR (Sandøy 2016, sec. 5.2).
 
-Plant (heave row of the process model of SPEC section 4; z down, SNAME signs; Fossen 2011, ch. 6)::
+Plant (heave row of the process model (Sandøy 2016, ch. 3); z down, SNAME signs; Fossen 2011, ch. 6)::
 
     M w_dot = Z - D_l w - D_q |w| w + F,      z_dot = w
 

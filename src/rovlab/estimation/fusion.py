@@ -1,4 +1,4 @@
-"""Sensor fusion and automatic dead reckoning: per-channel sensor management (SPEC section 5).
+"""Sensor fusion and automatic dead reckoning: per-channel sensor management (Sandøy 2016, sec. 5.1).
 
 Every fused measurement is a *channel* j (e.g. ``qualisys.z``) with a row h_j of H, a nominal
 variance R_j and its own management state. At each sample the compiled kernel

@@ -1,4 +1,4 @@
-"""The depth-and-heading observer model assembled from a vehicle and a configuration (SPEC section 5).
+"""The depth-and-heading observer model assembled from a vehicle and a configuration (Sandøy 2016, sec. 5.1).
 
 State x = [z, psi, w, r, b_w, b_r], input u = [Z, N]. :func:`build_filter_model` takes the model
 parameters from the vehicle file (or the configuration's overrides), builds A, B, E with
@@ -299,7 +299,7 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
                                     f"a window of at least {_MIN_STUCK_SAMPLES} samples of {sensor.name} "
                                     f"({_MIN_STUCK_SAMPLES / rate:g} s at {rate:g} Hz), or 0 to switch the check off"))
             continue
-        # Lever arm (SPEC section 5): p_VO = p_m - R(Theta) l; with phi = theta = 0 the depth
+        # Lever arm (Sandøy 2016, sec. 5.1): p_VO = p_m - R(Theta) l; with phi = theta = 0 the depth
         # moves by l_z only, and w, r and psi need no correction.
         offset = float(sensor.position[2]) if mc.quantity == "z" else 0.0
         channels.append(Channel(

@@ -1,4 +1,4 @@
-"""First-order model from a step or relay response, any DOF (SPEC section 9.5; thesis sec. 4.2.2).
+"""First-order model from a step or relay response, any DOF (Sandøy 2016, sec. 4.2.2).
 
 Decoupled, linearised 1-DOF dynamics (surge shown; SNAME signs):
 
@@ -9,7 +9,7 @@ so, for a given rigid-body mass m (or inertia I_zz for yaw),
 
     X_udot = m - 1/k  (added mass, negative)   and   X_u = -a / k  (linear damping, negative).
 
-The thesis got k = 0.07769, a = 1.197 (X_udot ~ -5.56; its printed -5.517 is a slip, SPEC 11).
+The thesis got k = 0.07769, a = 1.197 (X_udot ~ -5.56; its printed -5.517 is a slip, corrected here).
 
 Output-error fit: the model's *position* response to the logged force (held constant between
 samples, i.e. exact zero-order-hold discretisation) is simulated and (k, a, initial position and

@@ -244,7 +244,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     report = write_report_html(out / "report.html", "rovlab demo: uDrone case studies", sections,
                                intro="Depth and heading LQG (Kalman filter + LQR) of uDrone, reproducing the "
                                      "simulation case studies of Sandøy (2016), ch. 5, with the numbers of "
-                                     "rovlab's SPEC section 7.")
+                                     "the thesis's sec. 5.3.1.")
     print()
     _print_summary(rows)
     print(f"\nreport: {report}")

@@ -1,4 +1,4 @@
-"""The 4-DOF process model of SPEC section 4 (Fossen 2011, ch. 6-7; SNAME notation).
+"""The 4-DOF process model of Sandøy 2016, ch. 3 (Fossen 2011, ch. 6-7; SNAME notation).
 
     eta_dot = J(psi) nu
     (M_RB + M_A) nu_dot + C_RB(nu) nu + C_A(nu) nu + D_L nu + D_NL(nu) nu + g = tau + b
@@ -272,7 +272,7 @@ def rk4_step(p: np.ndarray, x: np.ndarray, tau: np.ndarray, b: np.ndarray, h: fl
 
 def nu_dot(vehicle: Vehicle, eta: np.ndarray, nu: np.ndarray, tau: np.ndarray,
            b: np.ndarray | None = None) -> np.ndarray:
-    """Body acceleration nu_dot for state (eta, nu), force tau and bias b (SPEC section 4).
+    """Body acceleration nu_dot for state (eta, nu), force tau and bias b (Sandøy 2016, ch. 3).
 
     With roll = pitch = 0 the pose enters only through the depth: near the free surface
     (|z| < half the hull's height) buoyancy and heave added mass fall with the submerged fraction.

@@ -1,5 +1,5 @@
 """Simulated sensors: each channel samples one true quantity at its own rate, with its lever-arm
-offset and white noise (SPEC sections 2 and 5).
+offset and white noise (Sandøy 2016, sec. 4.4 and 5.1).
 
 Channel j measures ``truth[quantity[j]] + offset[j] + std[j] * n`` (n ~ N(0, 1), drawn beforehand
 from the run's seed) every ``period[j]`` control steps, wrapped to (-pi, pi] for angles; no

@@ -1,4 +1,4 @@
-"""The depth-and-heading law and the thrusters behind it, composed (SPEC sections 3 and 6).
+"""The depth-and-heading law and the thrusters behind it, composed (Sandøy 2016, ch. 2 and sec. 5.2).
 
 :class:`ThrusterMapping` turns the LQG demand tau = [Z, N] into the 4-DOF wrench
 [0, 0, Z, N] (rovlab.control.lqg.tau_to_wrench; K = M = 0 demanded) and allocates it to thruster

@@ -18,11 +18,11 @@ from rovlab.params.validate import ConfigError, Problem
 from rovlab.params.vehicle import Vehicle
 
 ESTIMATORS: dict[str, Callable[[Vehicle, DesignConfig], EstimatorSpec]] = {
-    "kf": kf.build,  # depth-and-heading Kalman filter (SPEC section 5)
+    "kf": kf.build,  # depth-and-heading Kalman filter (Sandøy 2016, sec. 5.1)
 }
 CONTROLLERS: dict[str, Callable[[Vehicle, DesignConfig], ControllerSpec]] = {
-    "lqg": lqg.build,  # LQR depth and heading with bias feed-forward (SPEC section 6)
-    "mrac": mrac.build,  # model-reference adaptive heave control, LQR heading (SPEC section 6)
+    "lqg": lqg.build,  # LQR depth and heading with bias feed-forward (Sandøy 2016, sec. 5.2)
+    "mrac": mrac.build,  # model-reference adaptive heave control, LQR heading (Sandøy 2016, sec. 5.2)
 }
 
 

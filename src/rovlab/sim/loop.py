@@ -1,4 +1,4 @@
-"""The closed loop, compiled once per choice of components (SPEC sections 4, 5, 7).
+"""The closed loop, compiled once per choice of components (Sandøy 2016, ch. 3 and sec. 5.1, 5.3.1).
 
 At control sample k (t_k = k h, h the estimator's sample time, 0.1 s for uDrone):
 

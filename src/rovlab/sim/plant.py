@@ -1,6 +1,6 @@
 """Plants for the closed-loop simulator: components of the plant slot (rovlab.core.components).
 
-* :class:`ProcessPlant` (SPEC section 4): x = [x, y, z, psi, u, v, w, r] integrated with
+* :class:`ProcessPlant` (Sandøy 2016, ch. 3): x = [x, y, z, psi, u, v, w, r] integrated with
   fixed-step RK4 on the one right-hand side of the model (rovlab.models.kinetics.rhs_into); the
   force on the body is tau (from the thrusters) + b (Gauss-Markov biases, advanced with their
   exact discrete form) + w_nu (white noise of power spectral density W, held over each RK4 step

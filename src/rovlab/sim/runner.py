@@ -509,7 +509,7 @@ def simulate(name_or_path: str, *, seed: int | None = None) -> SimResult:
 
 
 def summarise(result: SimResult) -> dict[str, Any]:
-    """metrics.json of one run (SPEC section 7): RMS error per state, step response per axis,
+    """metrics.json of one run (Sandøy 2016, sec. 5.3.1): RMS error per state, step response per axis,
     drop-out drift and NEES/NIS consistency."""
     c = result.columns
     sc = result.scenario

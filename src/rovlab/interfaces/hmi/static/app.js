@@ -681,7 +681,7 @@
 
   function mracForm(box) {
     const used = (hmi.loop && hmi.loop.mrac) || {};
-    // a new [mrac] table needs its source (closed schema, SPEC: every number carries its source)
+    // a new [mrac] table needs its source (closed schema, every number carries its source)
     const extra = () => (hmi.docs.config.mrac && hmi.docs.config.mrac.source) ? {} : { "mrac.source": "tuned in the rovlab HMI" };
     const ph = (v) => () => (v === undefined ? "" : short(v, 4));
     const gain = (i) => ph((used.gain || [])[i]);
