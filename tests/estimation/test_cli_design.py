@@ -76,14 +76,14 @@ def test_filter_a_log(capsys, tmp_path):
     assert code == 0, err
     assert "300 samples" in out and "qualisys.z" in out
     est = read_log(out_path)
-    for col in ("z", "psi", "w", "r", "b_w", "b_r", "var_z", "var_psi", "var_w", "var_r", "var_b_w", "var_b_r"):
+    for col in ("est_z", "est_psi", "est_w", "est_r", "est_b_w", "est_b_r", "var_z", "var_psi", "var_w", "var_r", "var_b_w", "var_b_r"):
         assert col in est.data and np.all(np.isfinite(est[col])), col
     status = est.text["status_z_qualisys"]
     assert status[50] == "ok" and status[140] == "lost-timeout" and status[152] == "recovering"
     assert set(est.text["status_z_pressure"]) == {"ok"}
     truth = 1.0 + 0.2 * np.sin(2 * np.pi * est.time / 20.0)
-    assert np.max(np.abs(est["z"][50:] - truth[50:])) < 0.03
-    assert abs(math.degrees(est["psi"][-1]) - 30.0 - math.degrees(0.1 * np.sin(2 * np.pi * 29.9 / 25.0))) < 1.0
+    assert np.max(np.abs(est["est_z"][50:] - truth[50:])) < 0.03
+    assert abs(math.degrees(est["est_psi"][-1]) - 30.0 - math.degrees(0.1 * np.sin(2 * np.pi * 29.9 / 25.0))) < 1.0
 
 
 def test_filter_to_stdout_and_with_a_gap(capsys, tmp_path):
@@ -94,7 +94,7 @@ def test_filter_to_stdout_and_with_a_gap(capsys, tmp_path):
     write_csv(log_path, {k: v[keep] for k, v in cols.items()})
     code, out, err = run(capsys, "filter", str(log_path), "--out", "-")
     # plain CSV: the header is the first line (no comment lines; the metadata goes to a sidecar)
-    assert code == 0 and out.splitlines()[0].startswith("time_s,z,psi") and "bridged" in err
+    assert code == 0 and out.splitlines()[0].startswith("time_s,est_z,est_psi") and "bridged" in err
 
 
 @pytest.mark.parametrize("body, needle", [
@@ -140,7 +140,7 @@ def test_filter_reports_faulty_samples(capsys, tmp_path):
     assert "pressure.z       60 samples, 59 used, 0 rejected by the gate, 1 not finite" in out
     est = read_log(tmp_path / "est.csv")
     assert est.text["status_z_pressure"][20] == "lost-nonfinite"
-    assert np.all(np.isfinite(est["z"]))
+    assert np.all(np.isfinite(est["est_z"]))
 
 
 def test_filter_keeps_epoch_time_stamps(capsys, tmp_path):

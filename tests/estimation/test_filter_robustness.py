@@ -46,7 +46,7 @@ def test_a_gap_of_1e18_s_restarts_from_the_prior(capsys, tmp_path):
     assert "3 gap(s) longer than 10000 samples" in out
     assert "restarted from its prior at line 22, line 23, line 24" in out and "bridged" not in out
     est = read_log(tmp_path / "est.csv")
-    assert np.all(np.isfinite(est["z"])) and np.all(np.isfinite(est["var_z"]))
+    assert np.all(np.isfinite(est["est_z"])) and np.all(np.isfinite(est["var_z"]))
 
 
 def test_a_gap_of_1e8_s_is_quick(capsys, tmp_path):
@@ -87,7 +87,7 @@ def test_a_stuck_1e308_sample_does_not_poison_the_estimate(capsys, tmp_path):
     assert code == 0, err
     assert "300 value(s) beyond +-1e6 treated as faulty" in out and "300 not finite" in out
     est = read_log(tmp_path / "est.csv")
-    for col in ("z", "psi", "w", "b_w", "var_z", "var_w"):
+    for col in ("est_z", "est_psi", "est_w", "est_b_w", "var_z", "var_w"):
         assert np.all(np.isfinite(est[col])), col
     assert est.text["status_z_pressure"][-1] == "lost-nonfinite"
 
@@ -198,7 +198,7 @@ def _fuzz(capsys, tmp_path, n, seed):
             assert not out.exists(), (i, text)
         else:
             est = read_log(out)
-            assert all(np.all(np.isfinite(est[c])) for c in ("z", "psi", "var_z")), (i, text)
+            assert all(np.all(np.isfinite(est[c])) for c in ("est_z", "est_psi", "var_z")), (i, text)
             out.unlink()
     return refused
 

@@ -178,6 +178,6 @@ def test_a_simulations_timeseries_feeds_rovlab_filter_directly(tmp_path):
     est = tmp_path / "est.csv"
     assert main(["filter", str(run_dir / "timeseries.csv"), "--config", "thesis", "--out", str(est)]) == 0
     sim, off = read_log(run_dir / "timeseries.csv"), read_log(est)
-    np.testing.assert_allclose(off["z"], sim["est_z"], atol=1e-6)
-    np.testing.assert_allclose(off["b_w"], sim["est_b_w"], atol=1e-4)
+    np.testing.assert_allclose(off["est_z"], sim["est_z"], atol=1e-6)
+    np.testing.assert_allclose(off["est_b_w"], sim["est_b_w"], atol=1e-4)
     assert (tmp_path / "est.csv.json").exists() and "#" not in est.read_text(encoding="utf-8")[:200]

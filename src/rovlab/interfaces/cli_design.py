@@ -183,7 +183,9 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     assert len(REASON_NAMES) <= 8
     labels = [status_label(c // 8, c % 8) if c // 8 < len(STATUS_NAMES) and c % 8 < len(REASON_NAMES) else "?"
               for c in range(8 * len(STATUS_NAMES))]
-    names = ["time_s", *model.states, *(f"var_{s}" for s in model.states), *(f"status_{c}" for c in columns)]
+    # the column names of a simulation's timeseries.csv (est_*, var_*, status_*): one scheme everywhere
+    names = ["time_s", *(f"est_{s}" for s in model.states), *(f"var_{s}" for s in model.states),
+             *(f"status_{c}" for c in columns)]
     comments = [f"rovlab filter {args.log}: vehicle {vehicle.name}, configuration {config.name}, "
                 f"h = {model.h:g} s", "units: SI (m, rad, m/s, rad/s, N, N m); var_* are the variances"]
     samples = np.zeros(m, dtype=np.int64)
@@ -199,7 +201,7 @@ def _cmd_filter(args: argparse.Namespace) -> int:
         nonlocal n_rows
         out: dict[str, Any] = {"time_s": run.t}
         for i, s in enumerate(model.states):
-            out[s] = run.x[:, i]
+            out[f"est_{s}"] = run.x[:, i]
         for i, s in enumerate(model.states):
             out[f"var_{s}"] = run.variance[:, i]
         for j, c in enumerate(columns):
