@@ -76,7 +76,8 @@ def test_filter_a_log(capsys, tmp_path):
     assert code == 0, err
     assert "300 samples" in out and "qualisys.z" in out
     est = read_log(out_path)
-    for col in ("est_z", "est_psi", "est_w", "est_r", "est_b_w", "est_b_r", "var_z", "var_psi", "var_w", "var_r", "var_b_w", "var_b_r"):
+    states = ("z", "psi", "w", "r", "b_w", "b_r")
+    for col in [f"est_{s}" for s in states] + [f"var_{s}" for s in states]:
         assert col in est.data and np.all(np.isfinite(est[col])), col
     status = est.text["status_z_qualisys"]
     assert status[50] == "ok" and status[140] == "lost-timeout" and status[152] == "recovering"
