@@ -65,6 +65,12 @@ def test_a_new_controller_is_one_module_plus_its_registration(hold_registered):
     assert "ctrl_depth_integral" in c and np.all(np.isfinite(c["ctrl_depth_integral"]))
     assert c["ctrl_depth_integral"][-1] != 0.0  # its state was advanced and logged
     assert "tau_Z" in c and "tau_N" not in c  # only the wrench entries it commands are logged
+    # a component from outside rovlab is compiled per process: it must never enter the shared
+    # on-disk cache index, which a process that cannot import this test module would fail to read
+    other = subprocess.run([sys.executable, "-c", "from rovlab.sim.runner import simulate; "
+                            "print(len(simulate('step-process-model').columns['time_s']))"],
+                           capture_output=True, text=True, timeout=600, cwd="/")
+    assert other.returncode == 0 and other.stdout.strip() == "601", other.stderr[-2000:]
 
 
 def test_unknown_components_and_missing_estimates_are_refused_by_name():

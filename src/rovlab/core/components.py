@@ -190,37 +190,37 @@ def _lookup(slot: str, comp_type) -> Callable:
                       f"(rovlab.core.components.register_*)")
 
 
-@overload(plant_truth, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
+@overload(plant_truth, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
 def _ol_plant_truth(plant, truth):
     fn = _lookup("plant_truth", plant)
     return lambda plant, truth: fn(plant, truth)
 
 
-@overload(plant_advance, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
+@overload(plant_advance, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
 def _ol_plant_advance(plant, drive, row, tau_cmd, tau_real):
     fn = _lookup("plant_advance", plant)
     return lambda plant, drive, row, tau_cmd, tau_real: fn(plant, drive, row, tau_cmd, tau_real)
 
 
-@overload(estimator_correct, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
+@overload(estimator_correct, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
 def _ol_estimator_correct(est, t, y, present, rep):
     fn = _lookup("estimator_correct", est)
     return lambda est, t, y, present, rep: fn(est, t, y, present, rep)
 
 
-@overload(estimator_predict, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
+@overload(estimator_predict, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
 def _ol_estimator_predict(est, t, tau):
     fn = _lookup("estimator_predict", est)
     return lambda est, t, tau: fn(est, t, tau)
 
 
-@overload(controller_step, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
+@overload(controller_step, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
 def _ol_controller_step(ctrl, t, nav, ref, tau):
     fn = _lookup("controller_step", ctrl)
     return lambda ctrl, t, nav, ref, tau: fn(ctrl, t, nav, ref, tau)
 
 
-@overload(controller_actuated, inline="always", jit_options={"cache": True})  # type: ignore[typeddict-unknown-key]
+@overload(controller_actuated, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
 def _ol_controller_actuated(ctrl, t, tau_demanded, tau_achieved):
     fn = _lookup("controller_actuated", ctrl)
     if fn is _no_actuated:

@@ -206,3 +206,18 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
         controller_actuated(ctrl, t, tau, tau_cmd)
         plant_advance(plant, drive, row, tau_cmd, tau_real)
     return k1 - k0
+
+
+# numba keeps one cache index per function, listing every signature compiled for it. A component
+# class defined outside rovlab (a user's script, a test module) in that index would make the
+# index unreadable in any process that cannot import that module, so loops with such components
+# are compiled by this uncached copy instead (per process).
+run_loop_uncached = njit(cache=False)(run_loop.py_func)
+
+
+def loop_for(*components: object):
+    """The loop to call for these components: the disk-cached one when every component class is
+    rovlab's own, else the per-process copy."""
+    if all(type(c).__module__.startswith("rovlab.") for c in components):
+        return run_loop
+    return run_loop_uncached

@@ -41,7 +41,7 @@ from rovlab.params.vehicle import Vehicle, load_vehicle
 from rovlab.sim import metrics as mx
 from rovlab.sim.actuators import Actuators, make_actuators
 from rovlab.sim.components import build_pair
-from rovlab.sim.loop import Drive, Logs, draw, new_logs, run_loop
+from rovlab.sim.loop import Drive, Logs, draw, loop_for, new_logs
 from rovlab.sim.plant import ObserverPlant, ProcessPlant
 from rovlab.sim.scenario import Scenario, scenario_from_dict
 
@@ -388,8 +388,9 @@ class Simulation:
         n = drive.refs.shape[0]
         logs = new_logs(n, len(prep.channels), self.estimator.x.shape[0], prep.actuators.rows.shape[0],
                         self.controller.state.shape[0])
-        done = run_loop(self.k, self.k + n, prep.h, self.plant, prep.sensors, self.estimator, self.controller,
-                        prep.actuators, prep.nav_of, prep.nees_idx, drive, logs)
+        loop = loop_for(self.plant, self.estimator, self.controller)
+        done = loop(self.k, self.k + n, prep.h, self.plant, prep.sensors, self.estimator, self.controller,
+                    prep.actuators, prep.nav_of, prep.nees_idx, drive, logs)
         self.k += done
         if done < n:
             raise PlantDiverged(self.k * prep.h, logs, done)
