@@ -219,7 +219,8 @@ def sensor_loss_events(columns: dict[str, np.ndarray], *, dropouts: Sequence[Any
         codes = np.asarray(columns[name], dtype=float)
         sensor, quantity = _status_channel(name)
         labels = {c: code_label(c) for c in np.unique(codes[np.isfinite(codes)])}
-        lost = np.array([np.isfinite(c) and labels[c].startswith("lost") for c in codes], dtype=bool)
+        lost_codes = [c for c, label in labels.items() if label.startswith("lost")]
+        lost = np.isin(codes, lost_codes)  # vectorised: this runs once per Monte Carlo run
         starts = np.flatnonzero(lost & ~np.concatenate([[False], lost[:-1]]))
         for k in starts:
             label = labels[codes[k]]
