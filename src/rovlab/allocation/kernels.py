@@ -33,7 +33,7 @@ from rovlab.allocation.lexicographic import (  # noqa: F401  (the compiled copie
 _TOL = 1e-9
 
 KERNELS = ("matvec", "null_basis", "_pivot", "_lp_stage", "_fix_coordinate", "_is_bound_of", "_solve_small",
-           "least_distance", "lexicographic_allocate", "allocate_kernel")
+           "least_distance", "lexicographic_allocate", "allocate_kernel", "allocate_into")
 
 
 def matvec(A: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -61,3 +61,33 @@ def allocate_kernel(B: np.ndarray, T: np.ndarray, s: np.ndarray, f_min: np.ndarr
     See rovlab.allocation.lexicographic.
     """
     return lexicographic_allocate(B, T, s, f_min, f_max, tau, level, n_levels, redistribute)
+
+
+def allocate_into(B: np.ndarray, T: np.ndarray, s: np.ndarray, f_min: np.ndarray, f_max: np.ndarray,
+                  tau: np.ndarray, level: np.ndarray, n_levels: int, redistribute: bool,
+                  f: np.ndarray, frac: np.ndarray) -> bool:
+    """:func:`allocate_kernel` into f (n) and frac (6), for a caller stepping it every sample
+    (the simulator's loop): a demand the pseudo-inverse meets within the limits (most samples)
+    costs one matrix-vector product and allocates nothing. Returns whether it was met in full."""
+    n = B.shape[1]
+    inside = True
+    for i in range(n):
+        acc = 0.0
+        for j in range(6):
+            acc += T[i, j] * tau[j]
+        f[i] = acc
+        if acc > f_max[i] or acc < f_min[i]:
+            inside = False
+    if inside:
+        for j in range(6):
+            frac[j] = 1.0
+        return True
+    f2, frac2 = lexicographic_allocate(B, T, s, f_min, f_max, tau, level, n_levels, redistribute)
+    met = True
+    for i in range(n):
+        f[i] = f2[i]
+    for j in range(6):
+        frac[j] = frac2[j]
+        if frac2[j] < 1.0:
+            met = False
+    return met

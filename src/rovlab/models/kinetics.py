@@ -168,7 +168,10 @@ def rhs_into(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, out):
           + (p[P_LIN + 3] + p[P_QUAD + 3] * abs(x7) + p[P_CUB + 3] * x7 * x7) * x7)
     for i in (0, 1, 3):  # heave is decoupled in M (M_RB row z = [0, 0, m, 0], M_A diagonal)
         out[4 + i] = (p[P_MINV + 4 * i] * g0 + p[P_MINV + 4 * i + 1] * g1 + p[P_MINV + 4 * i + 3] * g3)
-    out[6] = g2 / (p[P_M] - s_sub * p[P_ZWDOT])
+    if s_sub >= 1.0:  # submerged (almost always): 1 / (m - Z_wdot) is entry (2, 2) of M^-1, no division
+        out[6] = p[P_MINV + 10] * g2
+    else:
+        out[6] = g2 / (p[P_M] - s_sub * p[P_ZWDOT])
 
 
 @njit(cache=True)

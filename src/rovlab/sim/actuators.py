@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from rovlab.allocation.solvers import Allocator, allocate_kernel
+from rovlab.allocation.solvers import Allocator, allocate_into
 from rovlab.models.thrusters import ThrusterBank, bank_force, bank_pwm
 
 _DOF6 = (0, 1, 2, 5)  # X, Y, Z, N in the 6-DOF wrench [X, Y, Z, K, M, N]
@@ -34,12 +34,15 @@ class Actuators(NamedTuple):
     grid_force: np.ndarray
     pwm_res: float  # ESC resolution [us]; 0 = continuous
     tau6: np.ndarray  # (6) work
+    f: np.ndarray  # (n) work: allocated forces
+    frac: np.ndarray  # (6) work: achieved share per DOF
 
 
 def make_actuators(allocator: Allocator, bank: ThrusterBank, B_true: np.ndarray, pwm_res: float) -> Actuators:
     return Actuators(allocator.B, allocator.T, allocator._s, allocator.f_min, allocator.f_max, allocator.level,
                      int(allocator.n_levels), np.ascontiguousarray(B_true, dtype=float), bank.rows, bank.grid_pwm,
-                     bank.grid_force, float(pwm_res), np.zeros(6))
+                     bank.grid_force, float(pwm_res), np.zeros(6),
+                     np.zeros(allocator.B.shape[1]), np.ones(6))
 
 
 @njit(cache=True, inline="always")
@@ -52,7 +55,8 @@ def actuate(act, tau, tau_cmd, tau_real, pwm):
     tau6[1] = tau[1]
     tau6[2] = tau[2]
     tau6[5] = tau[3]
-    f, frac = allocate_kernel(act.B, act.T, act.s, act.f_min, act.f_max, tau6, act.level, act.n_levels, True)
+    f = act.f
+    allocate_into(act.B, act.T, act.s, act.f_min, act.f_max, tau6, act.level, act.n_levels, True, f, act.frac)
     cmd = bank_pwm(act.rows, act.grid_pwm, act.grid_force, f)
     nt = cmd.shape[0]
     if act.pwm_res > 0.0:
