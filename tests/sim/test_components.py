@@ -22,11 +22,14 @@ from rovlab.sim.scenario import load_scenario, load_scenario_data
 
 
 class HoldDepth(NamedTuple):
-    """A toy controller written the way docs/architecture.md says: a PI law on depth with its
-    integrator as state, nothing on heading."""
+    """A toy controller written the way docs/architecture.md says: a PID law on depth (the
+    derivative from the estimated heave velocity) with its integrator as state, nothing on
+    heading. (A PI alone leaves uDrone's heave with only its light hydrodynamic damping: it
+    oscillates for minutes, and where it is at 60 s depends on the estimate's every detail.)"""
 
     kp: float
     ki: float
+    kd: float
     h: float
     state: np.ndarray  # [integral of the depth error]
 
@@ -37,7 +40,7 @@ def _hold_step(ctrl, t, nav, ref, tau):
     ctrl.state[0] += ctrl.h * e
     tau[0] = 0.0
     tau[1] = 0.0
-    tau[2] = ctrl.kp * e + ctrl.ki * ctrl.state[0] - nav[10]
+    tau[2] = ctrl.kp * e + ctrl.ki * ctrl.state[0] - ctrl.kd * nav[6] - nav[10]
     tau[3] = 0.0
 
 
@@ -45,7 +48,8 @@ register_controller(HoldDepth, state=("state",), step=_hold_step)
 
 
 def _build_hold(vehicle, config):
-    return ControllerSpec(kernel=HoldDepth(40.0, 4.0, config.sample_time, np.zeros(1)), needs=("z", "b_Z"),
+    return ControllerSpec(kernel=HoldDepth(40.0, 4.0, 60.0, config.sample_time, np.zeros(1)),
+                          needs=("z", "w", "b_Z"),
                           references=("z",), outputs=("Z",), state_names=("depth_integral",))
 
 
@@ -60,7 +64,7 @@ def test_a_new_controller_is_one_module_plus_its_registration(hold_registered):
 
     res = run_prepared(prepare(replace(sc, controller="hold")))
     c = res.columns
-    assert abs(c["true_z"][-1] - 0.70) < 0.05  # the PI law brings the vehicle to the depth reference
+    assert abs(c["true_z"][-1] - 0.70) < 0.05  # the PID law brings the vehicle to the depth reference
     assert abs(c["true_z"][-1] - 0.70) < 0.5 * abs(c["true_z"][300] - 0.70)  # and keeps closing in
     assert "ctrl_depth_integral" in c and np.all(np.isfinite(c["ctrl_depth_integral"]))
     assert c["ctrl_depth_integral"][-1] != 0.0  # its state was advanced and logged

@@ -60,6 +60,7 @@ class Channel:
     startup_s: float  # no gate this long after the first sample
     stuck_samples: int  # samples per block of the variance (stuck) check; 0 = off
     stuck_bound: float  # lower chi-square quantile (stuck_samples - 1 dof) of the block scatter / R
+    maneuver_acceleration: float = 1.0  # SI (rad/s^2 for psi): bound of a missed change's pull (0 = off)
 
     @property
     def angle(self) -> bool:
@@ -104,6 +105,7 @@ class FilterModel:
             CFG_ANGLE,
             CFG_GATE,
             CFG_LOSE_AFTER,
+            CFG_MANEUVER,
             CFG_OFFSET,
             CFG_R,
             CFG_RAMP_N,
@@ -131,6 +133,7 @@ class FilterModel:
             cfg[j, CFG_STARTUP] = c.startup_s
             cfg[j, CFG_STUCK_N] = c.stuck_samples
             cfg[j, CFG_STUCK_BOUND] = c.stuck_bound
+            cfg[j, CFG_MANEUVER] = c.maneuver_acceleration
             row = self.H[j]
             unit = np.count_nonzero(row) == 1 and row[c.state_index] == 1.0
             cfg[j, CFG_STATE] = c.state_index if unit else -1
@@ -310,6 +313,7 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
             lose_after=f.gate_failures_to_lose, recovery_time_s=f.recovery_time_s, recovery_samples=n_ramp,
             reacquire_after_s=f.reacquire_after_s, startup_s=math.nan if f.startup_s is None else f.startup_s,
             stuck_samples=n_stuck, stuck_bound=_chi2_ppf(STUCK_FALSE_ALARM, n_stuck - 1) if n_stuck else 0.0,
+            maneuver_acceleration=f.maneuver_acceleration,
         ))
     if problems:
         raise ConfigError(problems, "filter configuration")

@@ -48,6 +48,8 @@ File format (every table is closed: unknown keys are errors; ``source`` is requi
     reacquire_after_s = 5.0                # re-admit a gate-lost sensor that disagrees this long
                                            # (unless a redundant sensor confirms the prediction)
     stuck_window_s = 1.0                   # variance check over blocks this long; 0 = off
+    maneuver_acceleration = 1.0            # m/s^2 (rad/s^2 for headings): how fast a change the model
+                                           # missed may pull the truth away; 0 = no such allowance
 
 (The former ``recovery_variance_factor`` is refused: a returning sensor is now under-weighted
 relative to the filter's own prior variance, see rovlab.estimation.fusion.)
@@ -135,6 +137,7 @@ class FusionSettings:
     recovery_time_s: float = 5.0
     reacquire_after_s: float = 5.0
     stuck_window_s: float = 1.0
+    maneuver_acceleration: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -399,6 +402,10 @@ def _fusion_settings(t: TableReader, base: FusionSettings, col: Collector) -> Fu
                                    what="0 = never re-admit a sensor the gate keeps rejecting"),
         stuck_window_s=t.number("stuck_window_s", base.stuck_window_s, nonnegative=True,
                                 what="s per block of the stuck-sensor variance check; 0 = no check"),
+        maneuver_acceleration=t.number("maneuver_acceleration", base.maneuver_acceleration, nonnegative=True,
+                                       plausible=(0.0, 50.0),
+                                       what="m/s^2 (rad/s^2 for headings) a change the model missed may "
+                                            "accelerate the truth away from the prediction; 0 = off"),
     )
     if t.has("recovery_variance_factor"):
         # The old transitional R (factor * R decaying to R) did not spread the correction once the
