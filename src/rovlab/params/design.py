@@ -103,6 +103,11 @@ OBSERVER_STATES = ("z", "psi", "w", "r", "b_w", "b_r")
 CONTROL_STATES = ("z", "psi", "w", "r")
 INPUTS = ("Z", "N")
 MEASURABLE = ("z", "psi", "w", "r")  # quantities the depth-and-heading model can fuse
+EKF_MEASURABLE = ("x", "y", "z", "psi", "u", "v", "w", "r")  # quantities the 4-DOF EKF can fuse
+MEASUREMENT_QUANTITIES = EKF_MEASURABLE  # what a [[measurements]] table may name (each estimator checks its own)
+EKF_STATES = ("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N")
+DOFS = ("X", "Y", "Z", "N")
+DP_AXES = ("x", "y", "z", "psi")
 MODEL_KEYS = ("mass", "I_zz", "Z_wdot", "N_rdot", "Z_w", "N_r")
 PSD_KEYS = ("w", "r", "b_w", "b_r")
 _DEG = math.pi / 180.0
@@ -193,6 +198,52 @@ class MRACConfig:
     given: bool = False  # the file had an [mrac] table
 
 
+_EKF_STATE_KEYS = {"x": (0, 1.0), "y": (1, 1.0), "z": (2, 1.0), "psi_deg": (3, _DEG), "u": (4, 1.0),
+                   "v": (5, 1.0), "w": (6, 1.0), "r_deg_s": (7, _DEG), "b_X": (8, 1.0), "b_Y": (9, 1.0),
+                   "b_Z": (10, 1.0), "b_N": (11, 1.0)}
+
+
+@dataclass(frozen=True, eq=False)
+class EKFConfig:
+    """The [ekf] table: noise model and initial belief of the 4-DOF EKF (rovlab.estimation.ekf), SI.
+
+    force_psd: white force/moment noise W on [X, Y, Z, N] (enters like tau); bias_psd and
+    bias_time_constant_s: the Gauss-Markov bias per DOF (b_dot = -b/T + w_b, w_b of PSD bias_psd);
+    current: a known constant current (NED, m/s; 0 = unknown, left to the biases).
+    """
+
+    force_psd: np.ndarray = field(default_factory=lambda: np.array([1e-2, 1e-2, 1e-2, 1e-4]))
+    bias_psd: np.ndarray = field(default_factory=lambda: np.array([2e-3, 2e-3, 3e-3, 1e-6]))
+    bias_time_constant_s: np.ndarray = field(default_factory=lambda: np.full(4, 60.0))
+    current: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    substeps: int = 10  # RK4 steps per sample in the prediction
+    dead_reckoning: tuple[str, ...] = ()  # states accepted as unobservable (e.g. x, y without a position fix)
+    initial_state: np.ndarray = field(default_factory=lambda: np.zeros(12))
+    initial_std: np.ndarray = field(default_factory=lambda: np.array(
+        [1.0, 1.0, 1.0, math.pi, 0.5, 0.5, 0.5, math.radians(30.0), 10.0, 10.0, 10.0, 1.0]))
+    source: str = "rovlab defaults (rovlab.params.design.EKFConfig)"
+    given: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class DPConfig:
+    """The [dp] table: the dynamic-positioning controller (rovlab.control.dp), SI and radians.
+
+    Per axis (x, y, z, psi): closed-loop natural frequency ``bandwidth`` [rad/s] and relative
+    damping of the PID pole placement; reference-model natural frequency and speed limit.
+    """
+
+    bandwidth: np.ndarray = field(default_factory=lambda: np.array([0.6, 0.6, 0.6, 0.8]))
+    damping: float = 1.0
+    integral_ratio: float = 0.1  # K_i = integral_ratio * omega_n * K_p (Fossen 2011, sec. 12.2)
+    reference_bandwidth: np.ndarray = field(default_factory=lambda: np.array([0.4, 0.4, 0.4, 0.5]))
+    reference_damping: float = 1.0
+    max_speed: np.ndarray = field(default_factory=lambda: np.array([0.15, 0.15, 0.15, math.radians(20.0)]))
+    anti_windup: float = 1.0  # back-calculation gain (times omega_n) when the thrusters saturate; 0 = off
+    source: str = "rovlab defaults (rovlab.params.design.DPConfig)"
+    given: bool = False
+
+
 @dataclass(frozen=True, eq=False)
 class DesignConfig:
     """A validated filter/controller configuration (SI units, radians)."""
@@ -216,6 +267,8 @@ class DesignConfig:
     estimator: str = "kf"  # the estimator component (rovlab.sim.components.ESTIMATORS)
     controller: str = "lqg"  # the controller component (rovlab.sim.components.CONTROLLERS)
     mrac: MRACConfig = field(default_factory=MRACConfig)  # the optional [mrac] table
+    ekf: EKFConfig = field(default_factory=EKFConfig)  # the optional [ekf] table
+    dp: DPConfig = field(default_factory=DPConfig)  # the optional [dp] table
 
     @property
     def W(self) -> np.ndarray:
@@ -358,6 +411,12 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     mrac = _mrac_table(top.table("mrac", required=False), present=top.has("mrac"))
     if mrac.given:
         sources["mrac"] = mrac.source
+    ekf = _ekf_table(top.table("ekf", required=False), present=top.has("ekf"))
+    if ekf.given:
+        sources["ekf"] = ekf.source
+    dp = _dp_table(top.table("dp", required=False), present=top.has("dp"))
+    if dp.given:
+        sources["dp"] = dp.source
     top.finish()
     col.raise_if_any("filter configuration")
 
@@ -368,8 +427,82 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         bias_time_per_mass=per_mass, bias_time_constant=constants, measurements=tuple(measurements),
         initial_state=x0, initial_std=std, lqr_Q=Q, lqr_R=R, lqr_bryson=bryson,
         reference_gain=reference, sources=sources, file=file, estimator=estimator, controller=controller,
-        mrac=mrac,
+        mrac=mrac, ekf=ekf, dp=dp,
     )
+
+
+def _per_key(t: TableReader, name: str, keys: tuple[str, ...], base: np.ndarray, *, factors: tuple[float, ...] | None = None,
+             positive: bool = False, nonnegative: bool = False, what: str = "") -> np.ndarray:
+    """An inline table of numbers per key (missing keys keep ``base``), times ``factors``."""
+    out = np.array(base, dtype=float)
+    sub = t.table(name, required=False)
+    for i, key in enumerate(keys):
+        if sub.has(key):
+            out[i] = sub.number(key, positive=positive, nonnegative=nonnegative, what=what) * (
+                factors[i] if factors else 1.0)
+    sub.finish()
+    return out
+
+
+def _ekf_table(t: TableReader, *, present: bool) -> EKFConfig:
+    """The optional [ekf] table (closed schema; every problem collected)."""
+    base = EKFConfig()
+    if not present:
+        return base
+    source = t.string("source")
+    fpsd = _per_key(t, "force_psd", DOFS, base.force_psd, nonnegative=True, what="N^2/Hz or (N m)^2/Hz")
+    bpsd = _per_key(t, "bias_psd", DOFS, base.bias_psd, nonnegative=True, what="N^2/s per s (PSD of the bias driver)")
+    bT = _per_key(t, "bias_time_constant_s", DOFS, base.bias_time_constant_s, positive=True, what="s")
+    for i, k in enumerate(DOFS):
+        if np.isfinite(bT[i]) and not BIAS_TIME_RANGE[0] <= bT[i] <= BIAS_TIME_RANGE[1]:
+            t.problem(f"bias_time_constant_s.{k}", float(bT[i]), f"a time in [{BIAS_TIME_RANGE[0]:g}, "
+                      f"{BIAS_TIME_RANGE[1]:g}] s")
+    cur = _per_key(t, "current", ("north", "east", "down"), base.current, what="m/s, NED")
+    substeps = t.integer("substeps", base.substeps, lo=1)
+    dead: list[str] = []
+    if t.has("dead_reckoning"):
+        raw = t.raw("dead_reckoning")
+        if not isinstance(raw, list) or not all(isinstance(v, str) and v in EKF_STATES for v in raw):
+            t.problem("dead_reckoning", raw, "a list of EKF states (" + ", ".join(EKF_STATES) + ")")
+        else:
+            dead = list(raw)
+    if substeps > 1000:
+        t.problem("substeps", substeps, "at most 1000 RK4 steps per sample")
+        substeps = base.substeps
+    keys = tuple(_EKF_STATE_KEYS)
+    factors = tuple(f for _, f in _EKF_STATE_KEYS.values())
+    x0 = _per_key(t, "initial_state", keys, base.initial_state / np.array(factors), factors=factors)
+    std = _per_key(t, "initial_std", keys, base.initial_std / np.array(factors), factors=factors, nonnegative=True)
+    t.finish()
+    for arr in (fpsd, bpsd, bT, cur, x0, std):
+        arr.setflags(write=False)
+    return EKFConfig(force_psd=fpsd, bias_psd=bpsd, bias_time_constant_s=bT, current=cur, substeps=substeps,
+                     initial_state=x0, initial_std=std, dead_reckoning=tuple(dead), source=source, given=True)
+
+
+def _dp_table(t: TableReader, *, present: bool) -> DPConfig:
+    """The optional [dp] table (closed schema; every problem collected)."""
+    base = DPConfig()
+    if not present:
+        return base
+    source = t.string("source")
+    axes = ("x", "y", "z", "psi")
+    speed_keys = ("x", "y", "z", "psi_deg_s")
+    bw = _per_key(t, "bandwidth", axes, base.bandwidth, positive=True, what="rad/s")
+    zeta = t.number("damping", base.damping, positive=True, hi=10.0, what="relative damping of the closed loop")
+    ratio = t.number("integral_ratio", base.integral_ratio, nonnegative=True, hi=1.0,
+                     what="K_i = ratio * omega_n * K_p; 0 = no integral action")
+    rbw = _per_key(t, "reference_bandwidth", axes, base.reference_bandwidth, positive=True, what="rad/s")
+    rzeta = t.number("reference_damping", base.reference_damping, positive=True, hi=10.0)
+    speed = _per_key(t, "max_speed", speed_keys, base.max_speed / np.array([1, 1, 1, _DEG]),
+                     factors=(1.0, 1.0, 1.0, _DEG), positive=True, what="m/s, or deg/s for psi_deg_s")
+    aw = t.number("anti_windup", base.anti_windup, nonnegative=True, hi=100.0,
+                  what="back-calculation gain relative to omega_n; 0 = off")
+    t.finish()
+    for arr in (bw, rbw, speed):
+        arr.setflags(write=False)
+    return DPConfig(bandwidth=bw, damping=zeta, integral_ratio=ratio, reference_bandwidth=rbw, reference_damping=rzeta,
+                    max_speed=speed, anti_windup=aw, source=source, given=True)
 
 
 def _state_table(t: TableReader, name: str, keys: Mapping[str, tuple[int, float]], *,
@@ -418,10 +551,10 @@ def _measurement(t: TableReader, defaults: FusionSettings) -> MeasurementConfig:
     if (sensor is None) == (kind is None):
         t.problem("sensor", "both sensor and kind" if sensor is not None else "neither sensor nor kind",
                   "exactly one of sensor = NAME (a vehicle sensor) and kind = KIND")
-    quantity = t.string("quantity", choices=MEASURABLE)
+    quantity = t.string("quantity", choices=MEASUREMENT_QUANTITIES)
     if kind and quantity and quantity not in SENSOR_CHANNELS.get(kind, ()):
         t.problem("quantity", quantity, f"a channel of a {kind} sensor: "
-                  + ", ".join(c for c in SENSOR_CHANNELS[kind] if c in MEASURABLE))
+                  + ", ".join(c for c in SENSOR_CHANNELS[kind] if c in MEASUREMENT_QUANTITIES))
     variance = t.number("variance", positive=True, what="SI units squared") if t.has("variance") else None
     source = t.string("source", "")
     fusion = _fusion_settings(t, defaults, t.collector)

@@ -256,8 +256,8 @@ def schedule(sc: Scenario, channels: tuple[Any, ...], times: np.ndarray,
         if c.sensor in unavailable:
             dropout[:, j] = True
     idx = np.maximum(np.searchsorted(sc.reference_times, times, side="right") - 1, 0)
-    refs = np.column_stack([np.full(len(times), sc.initial[0]), np.full(len(times), sc.initial[1]),
-                            sc.reference_z[idx], sc.reference_psi[idx]])
+    ref_x, ref_y = sc.reference_xy()
+    refs = np.column_stack([ref_x[idx], ref_y[idx], sc.reference_z[idx], sc.reference_psi[idx]])
     return dropout, refs
 
 
@@ -298,6 +298,7 @@ def parameter_sets(truth: Vehicle, sc: Scenario) -> np.ndarray:
         # extra buoyancy (positive = lighter): the scenario's offset plus the events so far
         p[kin.P_BUOY] += db + sc.buoyancy_offset
         p[kin.P_GZ] += db + sc.buoyancy_offset
+        p[kin.P_VC:kin.P_VC + 3] = sc.current  # the ocean current (NED), 0 unless the scenario sets one
         rows.append(p)
     if problems:
         raise ConfigError(problems, "scenario file")
