@@ -112,7 +112,7 @@ def expm_pade(A):
         sign = -sign
         N += c * X
         D += (sign * c) * X
-    E = np.linalg.solve(D, N)
+    E = np.ascontiguousarray(np.linalg.solve(D, N))
     for _ in range(j):
         E = E @ E
     return E
@@ -196,7 +196,7 @@ def van_loan(A, W, h, F):
         F[8 + d, n + 8 + d] = W[4 + d] * h
     G = expm_pade(F)
     Phi = np.ascontiguousarray(G[n:, n:].T)
-    Q = Phi @ G[:n, n:]
+    Q = Phi @ np.ascontiguousarray(G[:n, n:])
     for i in range(n):  # symmetric by construction; remove the round-off
         for j in range(i + 1, n):
             q = 0.5 * (Q[i, j] + Q[j, i])
@@ -304,7 +304,7 @@ def build(vehicle: Vehicle, config: DesignConfig) -> EstimatorSpec:
     observable, touched, V = observability(A, H, EKF_STATES)
     accepted = set(ec.dead_reckoning)
     if not observable and not set(touched) <= accepted:
-        problem = unobservable_problem(file, channels, touched, V)
+        problem = unobservable_problem(file, channels, touched, V, EKF_STATES)
         extra = [s for s in touched if s not in accepted]
         raise ConfigError([Problem(problem.file, problem.key, problem.value,
                                    problem.expected.replace("Add a measurement", "Add a measurement (a position fix: "

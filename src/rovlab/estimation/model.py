@@ -366,9 +366,10 @@ def make_channels(vehicle: Vehicle, config: DesignConfig, state_of: dict[str, in
         ))
     return channels, problems
 
-def unobservable_problem(file: str, channels, touched: tuple[str, ...], V: np.ndarray) -> Problem:
+def unobservable_problem(file: str, channels, touched: tuple[str, ...], V: np.ndarray,
+                         states: tuple[str, ...] = STATES) -> Problem:
     names = ", ".join(c.name for c in channels) or "no measurements"
-    directions = "; ".join(describe_direction(V[:, k]) for k in range(V.shape[1]))
+    directions = "; ".join(describe_direction(V[:, k], states) for k in range(V.shape[1]))
     missing = [s for s in ("z", "psi") if s in touched]
     hint = (" Add a measurement of " + " and ".join(missing) + "." if missing
             else " Add a measurement that sees these states.")
