@@ -574,4 +574,6 @@ def summarise(result: SimResult) -> dict[str, Any]:
     # consistency: NEES of the corrected estimate, NIS per used measurement
     out["nees"] = {"states": list(result.nees_states), **mx.consistency(result.nees, len(result.nees_states))}
     out["nis"] = mx.consistency(result.nis, 1)
+    if "est_x" in c:  # a 4-DOF estimate (e.g. estimator "ekf"): the planar and dynamic-positioning numbers
+        out.update(mx.positioning_metrics(c, result.meta["dropouts"], observer=sc.plant == "observer"))
     return out
