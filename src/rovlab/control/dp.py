@@ -17,10 +17,13 @@ and Motion Control, Wiley:
   placement on the decoupled mass-damper of each axis, sec. 12.2.4): with the NED error
   e = eta_hat - eta_d (heading wrapped) and the body velocity error nu_tilde = nu_hat - R(psi)^T eta_d',
 
-      tau = M R(psi)^T eta_d'' + D_L R(psi)^T eta_d'            (feed-forward of the reference)
+      tau = M nu_d' + D(nu_d) nu_d                             (feed-forward of the reference)
             - R(psi)^T (K_p e + K_i int e) - K_d nu_tilde        (PID, the integral kept in NED)
             - b_hat                                              (bias feed-forward)
 
+  nu_d = R(psi)^T eta_d' and nu_d' ~ R(psi)^T eta_d'' in surge and sway; D(nu_d) the model's linear,
+  quadratic and cubic damping (at 20 deg/s of turn uDrone's quadratic yaw damping alone needs
+  0.19 N m, which the PID would otherwise meet with a heading error);
   K_p = M omega_n^2, K_d = 2 zeta omega_n M - D_L, K_i = (omega_n / 10) K_p (the rule of thumb
   K_i ~ omega_n / 10 K_p; ``integral_ratio``). M = diag(m - X_udot, m - Y_vdot, m - Z_wdot,
   I_zz - N_rdot), D_L = -diag(X_u, Y_v, Z_w, N_r). The bias is **subtracted**: it enters the model
@@ -67,6 +70,8 @@ class DP(NamedTuple):
     Kd: np.ndarray
     M: np.ndarray  # diagonal inertia (with added mass)
     D: np.ndarray  # diagonal linear damping (positive)
+    Dq: np.ndarray  # diagonal quadratic damping (positive)
+    Dc: np.ndarray  # diagonal cubic damping (positive)
     omega_r: np.ndarray  # reference-model natural frequencies [rad/s]
     zeta_r: float
     v_max: np.ndarray  # reference-model speed limits (m/s, rad/s)
@@ -97,6 +102,12 @@ def reference_model_step(eta, vel, acc, r, omega, zeta, v_max, h, n_sub):
 
 
 @njit(cache=True, inline="always")
+def _damping(ctrl, i, v):
+    """The model's damping force of axis i at the reference velocity v (feed-forward)."""
+    return (ctrl.D[i] + ctrl.Dq[i] * abs(v) + ctrl.Dc[i] * v * v) * v
+
+
+@njit(cache=True, inline="always")
 def _dp_step(ctrl, t, nav, ref, tau):
     s = ctrl.state
     psi = nav[3]
@@ -124,11 +135,11 @@ def _dp_step(ctrl, t, nav, ref, tau):
     v_d = -sn * vx + c * vy
     du_d = c * ax + sn * ay
     dv_d = -sn * ax + c * ay
-    tau[0] = (ctrl.M[0] * du_d + ctrl.D[0] * u_d - (c * fx + sn * fy) - ctrl.Kd[0] * (nav[4] - u_d) - nav[8])
-    tau[1] = (ctrl.M[1] * dv_d + ctrl.D[1] * v_d - (-sn * fx + c * fy) - ctrl.Kd[1] * (nav[5] - v_d) - nav[9])
-    tau[2] = (ctrl.M[2] * s[_ACC + 2] + ctrl.D[2] * s[_VEL + 2] - ctrl.Kp[2] * e[2] - ctrl.Ki[2] * s[_INT + 2]
+    tau[0] = (ctrl.M[0] * du_d + _damping(ctrl, 0, u_d) - (c * fx + sn * fy) - ctrl.Kd[0] * (nav[4] - u_d) - nav[8])
+    tau[1] = (ctrl.M[1] * dv_d + _damping(ctrl, 1, v_d) - (-sn * fx + c * fy) - ctrl.Kd[1] * (nav[5] - v_d) - nav[9])
+    tau[2] = (ctrl.M[2] * s[_ACC + 2] + _damping(ctrl, 2, s[_VEL + 2]) - ctrl.Kp[2] * e[2] - ctrl.Ki[2] * s[_INT + 2]
               - ctrl.Kd[2] * (nav[6] - s[_VEL + 2]) - nav[10])
-    tau[3] = (ctrl.M[3] * s[_ACC + 3] + ctrl.D[3] * s[_VEL + 3] - ctrl.Kp[3] * e[3] - ctrl.Ki[3] * s[_INT + 3]
+    tau[3] = (ctrl.M[3] * s[_ACC + 3] + _damping(ctrl, 3, s[_VEL + 3]) - ctrl.Kp[3] * e[3] - ctrl.Ki[3] * s[_INT + 3]
               - ctrl.Kd[3] * (nav[7] - s[_VEL + 3]) - nav[11])
     # advance the reference model toward the set-point (heading: the short way round)
     for i in range(4):
@@ -197,7 +208,9 @@ def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:
     """The DP component of a configuration (raises ConfigError)."""
     d = design(vehicle, config)
     dc = config.dp
-    kernel = DP(d.Kp, d.Ki, d.Kd, d.M, d.D, np.array(dc.reference_bandwidth, dtype=float), float(dc.reference_damping),
+    kernel = DP(d.Kp, d.Ki, d.Kd, d.M, d.D, -np.asarray(vehicle.damping_quadratic, dtype=float),
+                -np.asarray(vehicle.damping_cubic, dtype=float), np.array(dc.reference_bandwidth, dtype=float),
+                float(dc.reference_damping),
                 np.array(dc.max_speed, dtype=float), dc.anti_windup * np.asarray(dc.bandwidth, dtype=float),
                 float(config.sample_time), np.zeros(len(STATE_NAMES)))
     return ControllerSpec(kernel=kernel, needs=("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N"),
