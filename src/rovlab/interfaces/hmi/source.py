@@ -49,7 +49,8 @@ class Source(Protocol):
 
     def reset(self) -> None: ...
 
-    def set_reference(self, z: float | None = None, psi: float | None = None) -> None: ...
+    def set_reference(self, z: float | None = None, psi: float | None = None, *, x: float | None = None,
+                      y: float | None = None) -> None: ...
 
     def follow_schedule(self) -> None:
         """Go back to the scenario's (or mission's) reference schedule."""
@@ -108,9 +109,11 @@ class SimulationSource:
         sim = self.sim
         modes = {name: MODE_NAMES[int(sim.state["chs"][j, CH_MODE])] for j, name in enumerate(sim.channels)}
         z, psi = sim.reference
+        x, y = sim.reference_xy
         return {
             "time_s": sim.time,
-            "reference": {"z": float(z), "psi": float(psi), "schedule": bool(sim.reference_follows_scenario)},
+            "reference": {"z": float(z), "psi": float(psi), "x": float(x), "y": float(y),
+                          "schedule": bool(sim.reference_follows_scenario)},
             "sensors": dict(sim.sensor_available),
             "filter_modes": modes,
         }
@@ -121,8 +124,9 @@ class SimulationSource:
     def reset(self) -> None:
         self.sim.reset()
 
-    def set_reference(self, z: float | None = None, psi: float | None = None) -> None:
-        self.sim.set_reference(z=z, psi=psi)
+    def set_reference(self, z: float | None = None, psi: float | None = None, *, x: float | None = None,
+                      y: float | None = None) -> None:
+        self.sim.set_reference(z=z, psi=psi, x=x, y=y)
 
     def follow_schedule(self) -> None:
         self.sim.reference_follows_scenario = True
