@@ -816,6 +816,14 @@
         `sampled loop spectral radius ${short(a.sampled_radius, 3)}; a ${short(a.max_step)} m step takes ` +
         `${short(a.heave_force_needed[0], 3)} N down / ${short(a.heave_force_needed[1], 3)} N`;
     }
+    if (loop.dp) {  // dynamic positioning: the PID gains per axis (Fossen 2011, pole placement)
+      const g = loop.dp;
+      const axes = ["x", "y", "z", "ψ"];
+      $("loop-lqr").textContent = "DP: τ = M ν̇_d + D(ν_d) ν_d − Rᵀ(K_p e + K_i ∫e) − K_d ν̃ − b̂\n" +
+        "axis          M        K_p        K_i        K_d\n" +
+        axes.map((a, i) => a.padEnd(4) + [g.M[i], g.Kp[i], g.Ki[i], g.Kd[i]].map((x) => short(x, 4).padStart(11)).join("")).join("\n");
+      return;
+    }
     $("loop-lqr").textContent =
       (loop.mrac ? "heading: N = P r − K x − b̂_N (LQR row N)\n" : "τ = P r − K x − b̂\n") +
       "K (rows Z, N; columns z, ψ, w, r)\n" + loop.K.map(row).join("\n") +

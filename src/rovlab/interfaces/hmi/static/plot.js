@@ -359,6 +359,7 @@
       this.dirty = true;
       return s;
     }
+    get(name) { return this.byName[name]; }
     push(name, north, east) {
       const s = this.byName[name];
       if (s === undefined || !isFinite(north) || !isFinite(east)) return;
@@ -405,12 +406,12 @@
       ctx.fillStyle = "#666";
       for (let n = Math.ceil((nMid - span / 2) / step) * step; n <= nMid + span / 2; n += step) {
         ctx.beginPath(); ctx.moveTo(pad.l, Y(n)); ctx.lineTo(W - pad.r, Y(n)); ctx.stroke();
-        ctx.fillText(fmt(n, step), 4, Y(n) + 4);
+        ctx.fillText(fmt(Math.abs(n) < 1e-9 * step ? 0 : n, step), 4, Y(n) + 4);
       }
       const eSpan = pw / scale;
       for (let e = Math.ceil((eMid - eSpan / 2) / step) * step; e <= eMid + eSpan / 2; e += step) {
         ctx.beginPath(); ctx.moveTo(X(e), pad.t); ctx.lineTo(X(e), H - pad.b); ctx.stroke();
-        ctx.fillText(fmt(e, step), X(e) - 8, H - pad.b + 13);
+        ctx.fillText(fmt(Math.abs(e) < 1e-9 * step ? 0 : e, step), X(e) - 8, H - pad.b + 13);
       }
       ctx.fillText("east [m] →", W - pad.r - 70, H - 4);
       ctx.save();
