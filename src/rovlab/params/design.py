@@ -80,7 +80,30 @@ relative to the filter's own prior variance, see rovlab.estimation.fusion.)
     initial = { M = 18.44, D_l = 5.18, D_q = 36.99, F = -6.67 } # optional; default: the model
     bounds = { M = [5.0, 60.0], F = [-30.0, 30.0] }             # optional projection set
 
-Units are SI and radians, except keys ending in ``_deg`` / ``_deg_s`` (degrees, degrees/s).
+    [ekf]                                  # optional: the 4-DOF EKF (estimator = "ekf"; rovlab.estimation.ekf)
+    source = "..."
+    force_psd = { X = 1e-2, Y = 1e-2, Z = 1e-2, N = 1e-6 }      # white force noise W [N^2/Hz ...]
+    bias_psd = { X = 2e-2, Y = 2e-2, Z = 3e-3, N = 1e-4 }       # PSD of the bias drivers
+    bias_time_constant_s = { X = 60.0, Y = 60.0, Z = 60.0, N = 60.0 }
+    current = { north = 0.0, east = 0.0, down = 0.0 }           # a known current [m/s] (default 0)
+    substeps = 10                          # RK4 steps per sample
+    initial_state = { x = 0.0, psi_deg = 0.0 }                  # keys x y z psi_deg u v w r_deg_s b_X b_Y b_Z b_N
+    initial_std = { x = 1.0, psi_deg = 180.0 }
+    dead_reckoning = ["x", "y"]            # states accepted as unobservable (no position fix)
+
+    [dp]                                   # optional: the DP controller (controller = "dp"; rovlab.control.dp)
+    source = "..."
+    bandwidth = { x = 0.6, y = 0.6, z = 0.6, psi = 1.5 }        # closed-loop omega_n [rad/s]
+    damping = 1.0                          # zeta of the pole placement
+    integral_ratio = 0.1                   # K_i = ratio * omega_n * K_p
+    reference_bandwidth = { x = 0.4, y = 0.4, z = 0.4, psi = 0.5 }   # third-order reference model
+    reference_damping = 1.0
+    max_speed = { x = 0.15, y = 0.15, z = 0.15, psi_deg_s = 20.0 }  # reference-model speed limits
+    anti_windup = 1.0                      # back-calculation gain k_t = anti_windup * omega_n (0 = off)
+
+With ``estimator = "ekf"`` a measurement's quantity may also be x, y, u or v (motion capture
+position, DVL velocity). Units are SI and radians, except keys ending in ``_deg`` / ``_deg_s``
+(degrees, degrees/s).
 This module only reads and checks the file; the maths lives in ``rovlab.estimation`` and
 ``rovlab.control``.
 """
@@ -104,7 +127,6 @@ CONTROL_STATES = ("z", "psi", "w", "r")
 INPUTS = ("Z", "N")
 MEASURABLE = ("z", "psi", "w", "r")  # quantities the depth-and-heading model can fuse
 EKF_MEASURABLE = ("x", "y", "z", "psi", "u", "v", "w", "r")  # quantities the 4-DOF EKF can fuse
-MEASUREMENT_QUANTITIES = EKF_MEASURABLE  # what a [[measurements]] table may name (each estimator checks its own)
 EKF_STATES = ("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N")
 DOFS = ("X", "Y", "Z", "N")
 DP_AXES = ("x", "y", "z", "psi")
@@ -388,7 +410,8 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
 
     measurements: list[MeasurementConfig] = []
     for mr in top.tables("measurements", min_count=1):
-        measurements.append(_measurement(mr, defaults))
+        # the depth-and-heading filter fuses z, psi, w, r; the 4-DOF EKF x, y, u, v too
+        measurements.append(_measurement(mr, defaults, EKF_MEASURABLE if estimator == "ekf" else MEASURABLE))
     seen: dict[tuple[str | None, str | None, str], str] = {}
     for m in measurements:
         ident = (m.sensor, m.kind, m.quantity)
@@ -545,16 +568,17 @@ def _fusion_settings(t: TableReader, base: FusionSettings, col: Collector) -> Fu
     return settings
 
 
-def _measurement(t: TableReader, defaults: FusionSettings) -> MeasurementConfig:
+def _measurement(t: TableReader, defaults: FusionSettings,
+                 quantities: tuple[str, ...] = MEASURABLE) -> MeasurementConfig:
     sensor = t.string("sensor") if t.has("sensor") else None
     kind = t.string("kind", choices=tuple(SENSOR_CHANNELS)) if t.has("kind") else None
     if (sensor is None) == (kind is None):
         t.problem("sensor", "both sensor and kind" if sensor is not None else "neither sensor nor kind",
                   "exactly one of sensor = NAME (a vehicle sensor) and kind = KIND")
-    quantity = t.string("quantity", choices=MEASUREMENT_QUANTITIES)
+    quantity = t.string("quantity", choices=quantities)
     if kind and quantity and quantity not in SENSOR_CHANNELS.get(kind, ()):
         t.problem("quantity", quantity, f"a channel of a {kind} sensor: "
-                  + ", ".join(c for c in SENSOR_CHANNELS[kind] if c in MEASUREMENT_QUANTITIES))
+                  + ", ".join(c for c in SENSOR_CHANNELS[kind] if c in quantities))
     variance = t.number("variance", positive=True, what="SI units squared") if t.has("variance") else None
     source = t.string("source", "")
     fusion = _fusion_settings(t, defaults, t.collector)
