@@ -94,7 +94,7 @@ def test_ekf_equals_linear_kf_on_the_linear_model():
 def test_ekf_differs_from_kf_when_the_model_is_not_linear():
     """The equality above is not a tautology: with uDrone's quadratic damping (Sandøy 2016 table
     4.5) the EKF's heave prediction differs from the linear filter's."""
-    vehicle = load_vehicle("udrone")
+    vehicle = load_vehicle("udrone_dvl")
     _, espec = _pair()
     cfg = load_design_config("udrone_dp")
     est = ekf.build(vehicle, cfg).kernel
@@ -109,7 +109,7 @@ def test_ekf_differs_from_kf_when_the_model_is_not_linear():
 
 
 def test_compiled_van_loan_matches_scipy():
-    vehicle = load_vehicle("udrone")
+    vehicle = load_vehicle("udrone_dvl")
     cfg = load_design_config("udrone_dp")
     spec = ekf.build(vehicle, cfg)
     mdl = spec.model
@@ -161,7 +161,7 @@ def test_current_pushes_a_resting_vehicle_downstream():
 
 
 def test_unobservable_sensor_set_is_refused_with_the_states_named():
-    vehicle = load_vehicle("udrone")
+    vehicle = load_vehicle("udrone_dvl")
     cfg = load_design_config("udrone_dp")
     keep = tuple(m for m in cfg.measurements if m.kind != "motion_capture")  # no position fix
     with pytest.raises(ConfigError) as err:
@@ -171,7 +171,7 @@ def test_unobservable_sensor_set_is_refused_with_the_states_named():
 
 
 def test_dead_reckoning_accepts_what_the_user_names():
-    vehicle = load_vehicle("udrone")
+    vehicle = load_vehicle("udrone_dvl")
     cfg = load_design_config("udrone_dp")
     keep = tuple(m for m in cfg.measurements if m.kind != "motion_capture")
     # without motion capture neither the position nor the heading is seen (yaw rate only)
@@ -193,7 +193,7 @@ def test_kf_refuses_a_planar_measurement_clearly():
 
 
 def test_nan_measurement_and_input_do_not_break_the_filter():
-    vehicle = load_vehicle("udrone")
+    vehicle = load_vehicle("udrone_dvl")
     est = ekf.build(vehicle, load_design_config("udrone_dp")).kernel
     m = est.H.shape[0]
     rep = np.empty((m, N_REP))
@@ -202,3 +202,11 @@ def test_nan_measurement_and_input_do_not_break_the_filter():
     ekf._correct(est, 0.0, y, present, rep)
     ekf._predict(est, 0.0, np.array([np.nan, 1.0, np.inf, 0.0]))
     assert np.all(np.isfinite(est.x)) and np.all(np.isfinite(est.P))
+
+
+def test_udrone_dp_on_the_thesis_vehicle_is_refused_for_its_missing_dvl():
+    """The thesis's uDrone had no DVL: udrone_dp names the vehicle, the key and what is there."""
+    with pytest.raises(ConfigError) as err:
+        ekf.build(load_vehicle("udrone"), load_design_config("udrone_dp"))
+    text = str(err.value)
+    assert "udrone_dp.toml" in text and ".kind" in text and "dvl" in text and "'udrone'" in text

@@ -24,7 +24,7 @@ SEED = 4242
 
 @pytest.fixture(scope="module")
 def udrone():
-    return load_vehicle("udrone")
+    return load_vehicle("udrone_dvl")
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,7 @@ def _fresh(udrone, cfg):
 # --------------------------------------------------------------------------------------------
 
 def test_pole_placement_puts_each_axis_at_its_bandwidth(udrone, cfg):
-    """K_p = M w^2, K_d = 2 zeta w M - D (Fossen 2011, sec. 12.2.4): the closed loop
+    """K_p = M w^2, K_d = 2 zeta w M - D (Fossen 2011, sec. 12.2): the closed loop
     M s^2 + (D + K_d) s + K_p of each axis has its poles at -zeta w +- w sqrt(zeta^2 - 1)."""
     d = dp.design(udrone, cfg)
     for i, w in enumerate(cfg.dp.bandwidth):
@@ -51,7 +51,7 @@ def test_pole_placement_puts_each_axis_at_its_bandwidth(udrone, cfg):
 
 
 def test_reference_model_is_smooth_speed_limited_and_arrives():
-    """Third-order reference model (Fossen 2011, sec. 10.2.1): a 2 m step becomes a trajectory whose
+    """Third-order reference model (Fossen 2011, sec. 10.2): a 2 m step becomes a trajectory whose
     speed never exceeds the limit, whose acceleration starts at zero and which settles on the
     set-point without overshoot (zeta = 1)."""
     eta, vel, acc = np.zeros(1), np.zeros(1), np.zeros(1)
@@ -146,7 +146,7 @@ def _model_equals_plant(tmp_path, duration_s: float):
     """dp-station-keeping with the EKF's model equal to the plant: the EKF knows the current, its
     bias drivers are the truth's Gauss-Markov ones (PSD 2 sigma^2 / T), and the plant is neutrally
     buoyant (the EKF's heave bias has zero mean, like the truth's then)."""
-    vehicle = load_vehicle("udrone")
+    vehicle = load_vehicle("udrone_dvl")
     data, file = load_scenario_data("dp-station-keeping")
     cfg = read_toml(resolve_design("udrone_dp"))
     cur = data["truth"]["current"]

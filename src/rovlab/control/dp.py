@@ -5,7 +5,7 @@ acceleration feed-forward, bias feed-forward from the estimator and back-calcula
 The design is the textbook DP controller of Fossen (2011), Handbook of Marine Craft Hydrodynamics
 and Motion Control, Wiley:
 
-* **Reference model** (Fossen 2011, sec. 10.2.1): per axis a first-order low-pass filter in cascade
+* **Reference model** (Fossen 2011, sec. 10.2): per axis a first-order low-pass filter in cascade
   with a mass-damper-spring, i.e. the third-order model
 
       eta_d''' + (2 zeta + 1) omega eta_d'' + (2 zeta + 1) omega^2 eta_d' + omega^3 eta_d = omega^3 r
@@ -13,8 +13,8 @@ and Motion Control, Wiley:
   with the velocity saturated at ``max_speed`` (Fossen's saturating element), so that a set-point
   step becomes a smooth, feasible trajectory (position, velocity, acceleration). It is started at
   the first estimate the controller sees; the heading reference takes the short way round.
-* **Nonlinear PID** (Fossen 2011, sec. 12.2.5 "nonlinear PID control for DP", with gains by pole
-  placement on the decoupled mass-damper of each axis, sec. 12.2.4): with the NED error
+* **Nonlinear PID** (Fossen 2011, sec. 12.2, PID control for DP, with gains by pole
+  placement on the decoupled mass-damper of each axis): with the NED error
   e = eta_hat - eta_d (heading wrapped) and the body velocity error nu_tilde = nu_hat - R(psi)^T eta_d',
 
       tau = M nu_d' + D(nu_d) nu_d                             (feed-forward of the reference)
@@ -186,7 +186,7 @@ class DPDesign:
 
 
 def design(vehicle: Vehicle, config: DesignConfig) -> DPDesign:
-    """Pole placement per axis (Fossen 2011, sec. 12.2.4): K_p = M omega_n^2,
+    """Pole placement per axis (Fossen 2011, sec. 12.2): K_p = M omega_n^2,
     K_d = 2 zeta omega_n M - D, K_i = integral_ratio omega_n K_p. Raises ConfigError when an axis
     would need negative derivative gain (its own damping already exceeds the design's)."""
     dc = config.dp
