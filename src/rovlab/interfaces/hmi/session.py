@@ -239,7 +239,10 @@ class Session:
         psi = None
         if heading is not None:
             psi = math.remainder(heading * _DEG, 2.0 * math.pi)  # (-pi, pi]
-        self.source.set_reference(z=z, psi=psi, x=north, y=east)
+        if north is None and east is None:  # sources without position set-points keep their two-argument call
+            self.source.set_reference(z=z, psi=psi)
+        else:
+            self.source.set_reference(z=z, psi=psi, x=north, y=east)
         position = {k: v for k, v in (("north_m", north), ("east_m", east)) if v is not None}
         self.log.event(self.source.time, "reference", depth_m=z, heading_deg=heading, **position)
         return Outcome(state_changed=True)
