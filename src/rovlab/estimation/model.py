@@ -100,48 +100,54 @@ class FilterModel:
 
     def channel_config(self) -> np.ndarray:
         """The m x N_CFG array the compiled kernels read (see rovlab.estimation.fusion)."""
-        # imported here: fusion imports numba, which ``rovlab design`` does not need
-        from rovlab.estimation.fusion import (
-            CFG_ANGLE,
-            CFG_GATE,
-            CFG_LOSE_AFTER,
-            CFG_MANEUVER,
-            CFG_OFFSET,
-            CFG_R,
-            CFG_RAMP_N,
-            CFG_RAMP_TIME,
-            CFG_REACQUIRE,
-            CFG_STARTUP,
-            CFG_STATE,
-            CFG_STUCK_BOUND,
-            CFG_STUCK_N,
-            CFG_TIMEOUT,
-            N_CFG,
-        )
-
-        cfg = np.zeros((len(self.channels), N_CFG))
-        for j, c in enumerate(self.channels):
-            cfg[j, CFG_OFFSET] = c.offset
-            cfg[j, CFG_R] = c.variance
-            cfg[j, CFG_TIMEOUT] = c.timeout_s
-            cfg[j, CFG_GATE] = c.gate_threshold
-            cfg[j, CFG_LOSE_AFTER] = c.lose_after
-            cfg[j, CFG_RAMP_TIME] = c.recovery_time_s
-            cfg[j, CFG_RAMP_N] = c.recovery_samples
-            cfg[j, CFG_ANGLE] = 1.0 if c.angle else 0.0
-            cfg[j, CFG_REACQUIRE] = c.reacquire_after_s
-            cfg[j, CFG_STARTUP] = c.startup_s
-            cfg[j, CFG_STUCK_N] = c.stuck_samples
-            cfg[j, CFG_STUCK_BOUND] = c.stuck_bound
-            cfg[j, CFG_MANEUVER] = c.maneuver_acceleration
-            row = self.H[j]
-            unit = np.count_nonzero(row) == 1 and row[c.state_index] == 1.0
-            cfg[j, CFG_STATE] = c.state_index if unit else -1
-        return cfg
+        return channel_config(self.channels, self.H)
 
     def wrap_states(self) -> np.ndarray:
         """Which states are angles kept in (-pi, pi] (psi)."""
         return np.array([s == "psi" for s in self.states], dtype=np.bool_)
+
+
+def channel_config(channels: tuple[Channel, ...] | list[Channel], H: np.ndarray) -> np.ndarray:
+    """The m x N_CFG array the compiled kernels read for channels with measurement rows H
+    (see rovlab.estimation.fusion)."""
+    # imported here: fusion imports numba, which ``rovlab design`` does not need
+    from rovlab.estimation.fusion import (
+        CFG_ANGLE,
+        CFG_GATE,
+        CFG_LOSE_AFTER,
+        CFG_MANEUVER,
+        CFG_OFFSET,
+        CFG_R,
+        CFG_RAMP_N,
+        CFG_RAMP_TIME,
+        CFG_REACQUIRE,
+        CFG_STARTUP,
+        CFG_STATE,
+        CFG_STUCK_BOUND,
+        CFG_STUCK_N,
+        CFG_TIMEOUT,
+        N_CFG,
+    )
+
+    cfg = np.zeros((len(channels), N_CFG))
+    for j, c in enumerate(channels):
+        cfg[j, CFG_OFFSET] = c.offset
+        cfg[j, CFG_R] = c.variance
+        cfg[j, CFG_TIMEOUT] = c.timeout_s
+        cfg[j, CFG_GATE] = c.gate_threshold
+        cfg[j, CFG_LOSE_AFTER] = c.lose_after
+        cfg[j, CFG_RAMP_TIME] = c.recovery_time_s
+        cfg[j, CFG_RAMP_N] = c.recovery_samples
+        cfg[j, CFG_ANGLE] = 1.0 if c.angle else 0.0
+        cfg[j, CFG_REACQUIRE] = c.reacquire_after_s
+        cfg[j, CFG_STARTUP] = c.startup_s
+        cfg[j, CFG_STUCK_N] = c.stuck_samples
+        cfg[j, CFG_STUCK_BOUND] = c.stuck_bound
+        cfg[j, CFG_MANEUVER] = c.maneuver_acceleration
+        row = H[j]
+        unit = np.count_nonzero(row) == 1 and row[c.state_index] == 1.0
+        cfg[j, CFG_STATE] = c.state_index if unit else -1
+    return cfg
 
 
 # --------------------------------------------------------------------------------------------
@@ -253,7 +259,6 @@ def startup_time(Phi: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, P
 def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observable: bool = True
                        ) -> FilterModel:
     """Assemble Phi, Delta, Gamma, Q, H, R and the channels; raise ConfigError on any problem."""
-    from rovlab.estimation.fusion import STUCK_FALSE_ALARM  # here: fusion imports numba (design needs none)
 
     file = config.file or config.name
     params = HeaveYawParams.from_values(**config.model_values(vehicle))
@@ -273,48 +278,7 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
             "check the sample time, the spectral densities and the bias time constants)")],
             "filter configuration")
 
-    channels: list[Channel] = []
-    problems: list[Problem] = []
-    for mc in config.measurements:
-        sensor = mc.resolve(vehicle, file)
-        if mc.quantity not in SENSOR_CHANNELS.get(sensor.kind, ()):
-            problems.append(Problem(file, f"{mc.key}.quantity", mc.quantity,
-                                    f"a channel of sensor {sensor.name!r} (kind {sensor.kind}): "
-                                    + ", ".join(c for c in SENSOR_CHANNELS[sensor.kind] if c in _STATE_OF_QUANTITY)))
-            continue
-        variance = mc.variance if mc.variance is not None else sensor.variance.get(mc.quantity)
-        if variance is None:
-            problems.append(Problem(file, f"{mc.key}.variance", "missing",
-                                    f"a variance: vehicle {vehicle.name!r} gives none for "
-                                    f"{sensor.name}.{mc.quantity}"))
-            continue
-        name = f"{sensor.name}.{mc.quantity}"
-        if any(c.name == name for c in channels):
-            problems.append(Problem(file, mc.key, name, "each sensor quantity at most once"))
-            continue
-        f = mc.fusion
-        timeout = f.timeout_s if f.timeout_s is not None else _TIMEOUT_PERIODS / sensor.rate_hz
-        rate = min(sensor.rate_hz, 1.0 / config.sample_time)  # samples the filter can see per second
-        n_ramp = max(1, int(round(f.recovery_time_s * rate))) if f.recovery_time_s > 0 else 0
-        n_stuck = int(round(f.stuck_window_s * rate)) if f.stuck_window_s > 0 else 0
-        if 0 < n_stuck < _MIN_STUCK_SAMPLES:
-            problems.append(Problem(file, f"{mc.key}.stuck_window_s", f.stuck_window_s,
-                                    f"a window of at least {_MIN_STUCK_SAMPLES} samples of {sensor.name} "
-                                    f"({_MIN_STUCK_SAMPLES / rate:g} s at {rate:g} Hz), or 0 to switch the check off"))
-            continue
-        # Lever arm (Sandøy 2016, sec. 5.1): p_VO = p_m - R(Theta) l; with phi = theta = 0 the depth
-        # moves by l_z only, and w, r and psi need no correction.
-        offset = float(sensor.position[2]) if mc.quantity == "z" else 0.0
-        channels.append(Channel(
-            name=name, column=f"{mc.quantity}_{sensor.name}", sensor=sensor.name, kind=sensor.kind,
-            quantity=mc.quantity, state_index=_STATE_OF_QUANTITY[mc.quantity], offset=offset,
-            variance=float(variance), timeout_s=float(timeout), gate_probability=f.gate_probability,
-            gate_threshold=_chi2_ppf(f.gate_probability, 1) if f.gate_probability < 1.0 else np.inf,
-            lose_after=f.gate_failures_to_lose, recovery_time_s=f.recovery_time_s, recovery_samples=n_ramp,
-            reacquire_after_s=f.reacquire_after_s, startup_s=math.nan if f.startup_s is None else f.startup_s,
-            stuck_samples=n_stuck, stuck_bound=_chi2_ppf(STUCK_FALSE_ALARM, n_stuck - 1) if n_stuck else 0.0,
-            maneuver_acceleration=f.maneuver_acceleration,
-        ))
+    channels, problems = make_channels(vehicle, config, _STATE_OF_QUANTITY, estimator="kf")
     if problems:
         raise ConfigError(problems, "filter configuration")
 
@@ -346,9 +310,70 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
     )
 
 
-def unobservable_problem(file: str, channels, touched: tuple[str, ...], V: np.ndarray) -> Problem:
+
+def make_channels(vehicle: Vehicle, config: DesignConfig, state_of: dict[str, int], *, estimator: str
+                  ) -> tuple[list[Channel], list[Problem]]:
+    """The configuration's measurements as channels of a filter whose state index of each
+    measurable quantity is ``state_of`` (every problem collected, none raised). Shared by the
+    depth-and-heading filter and the 4-DOF EKF: the same sensor-management settings, lever arms
+    and variances."""
+    from rovlab.estimation.fusion import STUCK_FALSE_ALARM  # here: fusion imports numba (design needs none)
+
+    file = config.file or config.name
+    channels: list[Channel] = []
+    problems: list[Problem] = []
+    for mc in config.measurements:
+        sensor = mc.resolve(vehicle, file)
+        if mc.quantity not in SENSOR_CHANNELS.get(sensor.kind, ()):
+            problems.append(Problem(file, f"{mc.key}.quantity", mc.quantity,
+                                    f"a channel of sensor {sensor.name!r} (kind {sensor.kind}): "
+                                    + ", ".join(c for c in SENSOR_CHANNELS[sensor.kind] if c in state_of)))
+            continue
+        if mc.quantity not in state_of:
+            problems.append(Problem(file, f"{mc.key}.quantity", mc.quantity,
+                                    f"{', '.join(state_of)}: the filter of estimator = \"{estimator}\" has no "
+                                    f"state {mc.quantity}" + ("; the 4-DOF filter (estimator = \"ekf\") fuses it"
+                                                              if estimator == "kf" else "")))
+            continue
+        variance = mc.variance if mc.variance is not None else sensor.variance.get(mc.quantity)
+        if variance is None:
+            problems.append(Problem(file, f"{mc.key}.variance", "missing",
+                                    f"a variance: vehicle {vehicle.name!r} gives none for "
+                                    f"{sensor.name}.{mc.quantity}"))
+            continue
+        name = f"{sensor.name}.{mc.quantity}"
+        if any(c.name == name for c in channels):
+            problems.append(Problem(file, mc.key, name, "each sensor quantity at most once"))
+            continue
+        f = mc.fusion
+        timeout = f.timeout_s if f.timeout_s is not None else _TIMEOUT_PERIODS / sensor.rate_hz
+        rate = min(sensor.rate_hz, 1.0 / config.sample_time)  # samples the filter can see per second
+        n_ramp = max(1, int(round(f.recovery_time_s * rate))) if f.recovery_time_s > 0 else 0
+        n_stuck = int(round(f.stuck_window_s * rate)) if f.stuck_window_s > 0 else 0
+        if 0 < n_stuck < _MIN_STUCK_SAMPLES:
+            problems.append(Problem(file, f"{mc.key}.stuck_window_s", f.stuck_window_s,
+                                    f"a window of at least {_MIN_STUCK_SAMPLES} samples of {sensor.name} "
+                                    f"({_MIN_STUCK_SAMPLES / rate:g} s at {rate:g} Hz), or 0 to switch the check off"))
+            continue
+        # Lever arm (Sandøy 2016, sec. 5.1): p_VO = p_m - R(Theta) l; with phi = theta = 0 the depth
+        # moves by l_z only, and w, r and psi need no correction.
+        offset = float(sensor.position[2]) if mc.quantity == "z" else 0.0
+        channels.append(Channel(
+            name=name, column=f"{mc.quantity}_{sensor.name}", sensor=sensor.name, kind=sensor.kind,
+            quantity=mc.quantity, state_index=state_of[mc.quantity], offset=offset,
+            variance=float(variance), timeout_s=float(timeout), gate_probability=f.gate_probability,
+            gate_threshold=_chi2_ppf(f.gate_probability, 1) if f.gate_probability < 1.0 else np.inf,
+            lose_after=f.gate_failures_to_lose, recovery_time_s=f.recovery_time_s, recovery_samples=n_ramp,
+            reacquire_after_s=f.reacquire_after_s, startup_s=math.nan if f.startup_s is None else f.startup_s,
+            stuck_samples=n_stuck, stuck_bound=_chi2_ppf(STUCK_FALSE_ALARM, n_stuck - 1) if n_stuck else 0.0,
+            maneuver_acceleration=f.maneuver_acceleration,
+        ))
+    return channels, problems
+
+def unobservable_problem(file: str, channels, touched: tuple[str, ...], V: np.ndarray,
+                         states: tuple[str, ...] = STATES) -> Problem:
     names = ", ".join(c.name for c in channels) or "no measurements"
-    directions = "; ".join(describe_direction(V[:, k]) for k in range(V.shape[1]))
+    directions = "; ".join(describe_direction(V[:, k], states) for k in range(V.shape[1]))
     missing = [s for s in ("z", "psi") if s in touched]
     hint = (" Add a measurement of " + " and ".join(missing) + "." if missing
             else " Add a measurement that sees these states.")

@@ -128,8 +128,12 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
     paths.append(_save(fig, out / "errors.png", plt))
 
     # 3. biases
-    fig, axes = plt.subplots(1, 2, figsize=(12, 3.5), sharex=True)
-    for ax, (s, label) in zip(axes, [("b_w", "heave bias b_w [N]"), ("b_r", "yaw bias b_r [N m]")]):
+    bias_specs = [("b_w", "heave bias b_w [N]"), ("b_r", "yaw bias b_r [N m]")]
+    if _col(columns, "est_b_w") is None and _col(columns, "est_b_X") is not None:  # a 4-DOF estimate
+        bias_specs = [("b_X", "surge bias b_X [N]"), ("b_Y", "sway bias b_Y [N]"), ("b_Z", "heave bias b_Z [N]"),
+                      ("b_N", "yaw bias b_N [N m]")]
+    fig, axes = plt.subplots(1, len(bias_specs), figsize=(12, 3.5), sharex=True)
+    for ax, (s, label) in zip(axes, bias_specs):
         _shade(ax, windows)
         true = _col(columns, f"true_{s}")
         if true is not None:
@@ -177,6 +181,70 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
     fig.suptitle(f"{title}: control".strip(": "))
     fig.tight_layout()
     paths.append(_save(fig, out / "control.png", plt))
+    if _col(columns, "est_x") is not None and _col(columns, "est_y") is not None:
+        paths.extend(_planar_figures(out, columns, t, windows, title, plt))
+    return paths
+
+
+def _planar_figures(out: Path, columns: Mapping[str, np.ndarray], t: np.ndarray,
+                    windows: Sequence[tuple[float, float, str]], title: str, plt) -> list[Path]:
+    """A 4-DOF estimate (dynamic positioning): the xy track with the reference, and the planar
+    states x, y, u, v with the filter's +-2 sigma."""
+    paths = []
+    fig, ax = plt.subplots(figsize=(7, 7))
+    # NED seen from above: east to the right, north up
+    true_x, true_y = _col(columns, "true_x"), _col(columns, "true_y")
+    if true_x is not None and true_y is not None:
+        ax.plot(true_y, true_x, color="k", lw=1.2, label="truth")
+    ax.plot(_has(columns, "est_y"), _has(columns, "est_x"), color="tab:red", lw=0.8, label="estimate")
+    if _col(columns, "ctrl_x_d") is not None and _col(columns, "ctrl_y_d") is not None:
+        ax.plot(_has(columns, "ctrl_y_d"), _has(columns, "ctrl_x_d"), color="tab:blue", lw=1.0, ls=":",
+                label="reference model")
+    if _col(columns, "ref_x") is not None and _col(columns, "ref_y") is not None:
+        ax.plot(_has(columns, "ref_y"), _has(columns, "ref_x"), "s--", color="tab:green", lw=0.8, ms=5,
+                label="set-points")
+    for start, end, sensor in windows:
+        w = (t >= start) & (t < end)
+        if w.any() and true_x is not None and true_y is not None:
+            ax.plot(true_y[w], true_x[w], color="tab:orange", lw=2.0, alpha=0.6, label=f"{sensor} lost")
+    ax.set_xlabel("east y [m]")
+    ax.set_ylabel("north x [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"{title}: xy track".strip(": "))
+    fig.tight_layout()
+    paths.append(_save(fig, out / "track.png", plt))
+
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
+    specs = [("x", "north x [m]"), ("y", "east y [m]"), ("u", "surge velocity u [m/s]"), ("v", "sway velocity v [m/s]")]
+    for ax, (s, label) in zip(axes.ravel(), specs):
+        _shade(ax, windows)
+        lines = []
+        true = _col(columns, f"true_{s}")
+        if true is not None:
+            ax.plot(t, true, color="k", lw=1.2, label="truth")
+            lines.append(true)
+        est, var = _col(columns, f"est_{s}"), _col(columns, f"var_{s}")
+        if est is not None:
+            ax.plot(t, est, color="tab:red", lw=1.0, label="estimate")
+            lines.append(est)
+            if var is not None:
+                sd = 2 * np.sqrt(np.maximum(var, 0))
+                ax.fill_between(t, est - sd, est + sd, color="tab:red", alpha=0.15, lw=0, label="estimate +-2 sigma")
+        ref = _col(columns, f"ctrl_{s}_d")
+        if ref is not None:
+            ax.plot(t, ref, ":", color="tab:blue", lw=1.0, label="reference model")
+            lines.append(ref)
+        _limit_to(ax, lines)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    fig.suptitle(f"{title}: planar states".strip(": "))
+    fig.tight_layout()
+    paths.append(_save(fig, out / "planar.png", plt))
     return paths
 
 

@@ -4,7 +4,20 @@
     (M_RB + M_A) nu_dot + C_RB(nu) nu + C_A(nu) nu + D_L nu + D_NL(nu) nu + g = tau + b
 
 eta = [x, y, z, psi] (NED), nu = [u, v, w, r] (body), tau = [X, Y, Z, N]. Roll and pitch are
-assumed zero. The matrix builders below are plain numpy for reading and testing; the per-step
+assumed zero.
+
+Ocean current: a constant, irrotational current V_c = [V_N, V_E, V_D] (NED, packed at ``P_VC``,
+0 by default) enters through the relative velocity nu_r = nu - nu_c, nu_c = [R(psi)^T V_c; 0]. For
+such a current the rigid-body terms may be written in nu_r as well (Fossen 2011, Handbook of
+Marine Craft Hydrodynamics and Motion Control, sec. 8.3, Property 8.1), so
+
+    M nu_r_dot + C(nu_r) nu_r + D(nu_r) nu_r + g = tau + b,   nu_dot = nu_r_dot + nu_c_dot,
+    nu_c_dot = [r v_c, -r u_c, 0, 0],   eta_dot = J(psi) nu
+
+with nu (over ground, what a bottom-locked DVL measures) kept as the state. With V_c = 0 every
+expression reduces to the one without current, bit for bit.
+
+The matrix builders below are plain numpy for reading and testing; the per-step
 paths (``nu_dot``, ``plant_rhs``, ``rk4_step``) run on a packed parameter vector (see
 :func:`pack`) in numba-compiled code.
 """
@@ -33,7 +46,8 @@ P_ZWDOT = 34  # Z_wdot
 P_BUOY = 35  # buoyancy B when fully submerged [N]
 P_WEIGHT = 36  # weight W [N]
 P_HALF_H = 37  # half the hull's height [m]: the free surface cuts the hull when |z| < this
-P_SIZE = 38
+P_VC = 38  # 3 entries: constant, irrotational ocean current in NED [m/s] (0 unless a scenario sets it)
+P_SIZE = 41
 
 
 def J(psi: float) -> np.ndarray:
@@ -154,6 +168,13 @@ def rhs_into(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, out):
     out[1] = s * x4 + c * x5
     out[2] = x6
     out[3] = x7
+    # relative velocity nu_r = nu - nu_c (the current in body axes); the hydrodynamics below see nu_r
+    u_c = c * p[P_VC] + s * p[P_VC + 1]
+    v_c = -s * p[P_VC] + c * p[P_VC + 1]
+    w_c = p[P_VC + 2]
+    x4 = x4 - u_c
+    x5 = x5 - v_c
+    x6 = x6 - w_c
     m = p[P_M]
     a = m * (x5 + p[P_XG] * x7)
     cc = m * (x4 - p[P_YG] * x7)
@@ -172,23 +193,28 @@ def rhs_into(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, out):
         out[6] = p[P_MINV + 10] * g2
     else:
         out[6] = g2 / (p[P_M] - s_sub * p[P_ZWDOT])
+    if u_c != 0.0 or v_c != 0.0:  # nu_c_dot = d/dt R(psi)^T V_c = [r v_c, -r u_c, 0, 0]
+        out[4] += x7 * v_c
+        out[5] -= x7 * u_c
 
 
 @njit(cache=True)
 def jacobian_into(p, x, f, A):
-    """Analytic Jacobian A = df/dx (8 x 8) of :func:`rhs_into` at x with the total force f (4);
-    the force enters affinely (df/dtau = [0; M^-1]) and matters only where the free surface cuts
-    the hull. Compiled, for an EKF's prediction inside the simulator loop."""
-    u, v, r = x[4], x[5], x[7]
+    """Analytic Jacobian A = df/dx (8 x 8) of :func:`rhs_into` at x with the total force f (4)
+    (with the packed ocean current, if any); the force enters affinely (df/dtau = [0; M^-1]) and
+    matters only where the free surface cuts the hull. Compiled, for an EKF's prediction inside the simulator loop."""
+    c, s = math.cos(x[3]), math.sin(x[3])
+    u_c = c * p[P_VC] + s * p[P_VC + 1]
+    v_c = -s * p[P_VC] + c * p[P_VC + 1]
+    u, v, r = x[4] - u_c, x[5] - v_c, x[7]  # relative velocities (module docstring)
     m = p[P_M]
     x_g, y_g = p[P_XG], p[P_YG]
     Xu, Yv = p[P_XUDOT], p[P_YVDOT]
     for i in range(8):
         for j in range(8):
             A[i, j] = 0.0
-    c, s = math.cos(x[3]), math.sin(x[3])
-    A[0, 3] = -s * u - c * v
-    A[1, 3] = c * u - s * v
+    A[0, 3] = -s * x[4] - c * x[5]
+    A[1, 3] = c * x[4] - s * x[5]
     A[0, 4] = c
     A[0, 5] = -s
     A[1, 4] = s
@@ -205,7 +231,7 @@ def jacobian_into(p, x, f, A):
     G[3, 1] = -((Xu - Yv) * u + m * y_g * r)
     G[3, 3] = -(m * (x_g * u + y_g * v))
     for i in range(4):
-        nu_i = x[4 + i]
+        nu_i = (u, v, x[6] - p[P_VC + 2], r)[i]
         G[i, i] += p[P_LIN + i] + 2.0 * p[P_QUAD + i] * abs(nu_i) + 3.0 * p[P_CUB + i] * nu_i * nu_i
     s_sub = submerged(p, x[2])
     m_w = p[P_M] - s_sub * p[P_ZWDOT]
@@ -217,9 +243,19 @@ def jacobian_into(p, x, f, A):
             A[4 + i, 4 + j] = acc
     for j in range(4):
         A[6, 4 + j] = G[2, j] / m_w
+    if u_c != 0.0 or v_c != 0.0:
+        # psi turns the current in body axes: d nu_r / d psi = -d nu_c / d psi = [-v_c, u_c, 0, 0],
+        # and nu_c_dot = [r v_c, -r u_c] adds d/d psi = [-r u_c, -r v_c] and d/d r = [v_c, -u_c]
+        for i in (0, 1, 3):
+            A[4 + i, 3] = A[4 + i, 4] * (-v_c) + A[4 + i, 5] * u_c
+        A[6, 3] = A[6, 4] * (-v_c) + A[6, 5] * u_c
+        A[4, 3] += -r * u_c
+        A[5, 3] += -r * v_c
+        A[4, 7] += v_c
+        A[5, 7] += -u_c
     if 0.0 < s_sub < 1.0:  # inside the breach band the heave force and mass depend on z
         ds = 1.0 / (2.0 * p[P_HALF_H])
-        w = x[6]
+        w = x[6] - p[P_VC + 2]
         g2 = -(s_sub * p[P_BUOY] - p[P_WEIGHT]) + (p[P_LIN + 2] + p[P_QUAD + 2] * abs(w)
                                                       + p[P_CUB + 2] * w * w) * w
         # d/dz [(f_z + g2(z)) / m_w(z)], dg2/dz = -ds B, dm_w/dz = -ds Z_wdot

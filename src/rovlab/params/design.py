@@ -82,7 +82,30 @@ relative to the filter's own prior variance, see rovlab.estimation.fusion.)
     initial = { M = 18.44, D_l = 5.18, D_q = 36.99, F = -6.67 } # optional; default: the model
     bounds = { M = [5.0, 60.0], F = [-30.0, 30.0] }             # optional projection set
 
-Units are SI and radians, except keys ending in ``_deg`` / ``_deg_s`` (degrees, degrees/s).
+    [ekf]                                  # optional: the 4-DOF EKF (estimator = "ekf"; rovlab.estimation.ekf)
+    source = "..."
+    force_psd = { X = 1e-2, Y = 1e-2, Z = 1e-2, N = 1e-6 }      # white force noise W [N^2/Hz ...]
+    bias_psd = { X = 2e-2, Y = 2e-2, Z = 3e-3, N = 1e-4 }       # PSD of the bias drivers
+    bias_time_constant_s = { X = 60.0, Y = 60.0, Z = 60.0, N = 60.0 }
+    current = { north = 0.0, east = 0.0, down = 0.0 }           # a known current [m/s] (default 0)
+    substeps = 10                          # RK4 steps per sample
+    initial_state = { x = 0.0, psi_deg = 0.0 }                  # keys x y z psi_deg u v w r_deg_s b_X b_Y b_Z b_N
+    initial_std = { x = 1.0, psi_deg = 180.0 }
+    dead_reckoning = ["x", "y"]            # states accepted as unobservable (no position fix)
+
+    [dp]                                   # optional: the DP controller (controller = "dp"; rovlab.control.dp)
+    source = "..."
+    bandwidth = { x = 0.6, y = 0.6, z = 0.6, psi = 1.5 }        # closed-loop omega_n [rad/s]
+    damping = 1.0                          # zeta of the pole placement
+    integral_ratio = 0.1                   # K_i = ratio * omega_n * K_p
+    reference_bandwidth = { x = 0.4, y = 0.4, z = 0.4, psi = 0.5 }   # third-order reference model
+    reference_damping = 1.0
+    max_speed = { x = 0.15, y = 0.15, z = 0.15, psi_deg_s = 20.0 }  # reference-model speed limits
+    anti_windup = 1.0                      # back-calculation gain k_t = anti_windup * omega_n (0 = off)
+
+With ``estimator = "ekf"`` a measurement's quantity may also be x, y, u or v (motion capture
+position, DVL velocity). Units are SI and radians, except keys ending in ``_deg`` / ``_deg_s``
+(degrees, degrees/s).
 This module only reads and checks the file; the maths lives in ``rovlab.estimation`` and
 ``rovlab.control``.
 """
@@ -105,6 +128,10 @@ OBSERVER_STATES = ("z", "psi", "w", "r", "b_w", "b_r")
 CONTROL_STATES = ("z", "psi", "w", "r")
 INPUTS = ("Z", "N")
 MEASURABLE = ("z", "psi", "w", "r")  # quantities the depth-and-heading model can fuse
+EKF_MEASURABLE = ("x", "y", "z", "psi", "u", "v", "w", "r")  # quantities the 4-DOF EKF can fuse
+EKF_STATES = ("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N")
+DOFS = ("X", "Y", "Z", "N")
+DP_AXES = ("x", "y", "z", "psi")
 MODEL_KEYS = ("mass", "I_zz", "Z_wdot", "N_rdot", "Z_w", "N_r")
 PSD_KEYS = ("w", "r", "b_w", "b_r")
 _DEG = math.pi / 180.0
@@ -196,6 +223,52 @@ class MRACConfig:
     given: bool = False  # the file had an [mrac] table
 
 
+_EKF_STATE_KEYS = {"x": (0, 1.0), "y": (1, 1.0), "z": (2, 1.0), "psi_deg": (3, _DEG), "u": (4, 1.0),
+                   "v": (5, 1.0), "w": (6, 1.0), "r_deg_s": (7, _DEG), "b_X": (8, 1.0), "b_Y": (9, 1.0),
+                   "b_Z": (10, 1.0), "b_N": (11, 1.0)}
+
+
+@dataclass(frozen=True, eq=False)
+class EKFConfig:
+    """The [ekf] table: noise model and initial belief of the 4-DOF EKF (rovlab.estimation.ekf), SI.
+
+    force_psd: white force/moment noise W on [X, Y, Z, N] (enters like tau); bias_psd and
+    bias_time_constant_s: the Gauss-Markov bias per DOF (b_dot = -b/T + w_b, w_b of PSD bias_psd);
+    current: a known constant current (NED, m/s; 0 = unknown, left to the biases).
+    """
+
+    force_psd: np.ndarray = field(default_factory=lambda: np.array([1e-2, 1e-2, 1e-2, 1e-4]))
+    bias_psd: np.ndarray = field(default_factory=lambda: np.array([2e-3, 2e-3, 3e-3, 1e-6]))
+    bias_time_constant_s: np.ndarray = field(default_factory=lambda: np.full(4, 60.0))
+    current: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    substeps: int = 10  # RK4 steps per sample in the prediction
+    dead_reckoning: tuple[str, ...] = ()  # states accepted as unobservable (e.g. x, y without a position fix)
+    initial_state: np.ndarray = field(default_factory=lambda: np.zeros(12))
+    initial_std: np.ndarray = field(default_factory=lambda: np.array(
+        [1.0, 1.0, 1.0, math.pi, 0.5, 0.5, 0.5, math.radians(30.0), 10.0, 10.0, 10.0, 1.0]))
+    source: str = "rovlab defaults (rovlab.params.design.EKFConfig)"
+    given: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class DPConfig:
+    """The [dp] table: the dynamic-positioning controller (rovlab.control.dp), SI and radians.
+
+    Per axis (x, y, z, psi): closed-loop natural frequency ``bandwidth`` [rad/s] and relative
+    damping of the PID pole placement; reference-model natural frequency and speed limit.
+    """
+
+    bandwidth: np.ndarray = field(default_factory=lambda: np.array([0.6, 0.6, 0.6, 0.8]))
+    damping: float = 1.0
+    integral_ratio: float = 0.1  # K_i = integral_ratio * omega_n * K_p (Fossen 2011, sec. 12.2)
+    reference_bandwidth: np.ndarray = field(default_factory=lambda: np.array([0.4, 0.4, 0.4, 0.5]))
+    reference_damping: float = 1.0
+    max_speed: np.ndarray = field(default_factory=lambda: np.array([0.15, 0.15, 0.15, math.radians(20.0)]))
+    anti_windup: float = 1.0  # back-calculation gain (times omega_n) when the thrusters saturate; 0 = off
+    source: str = "rovlab defaults (rovlab.params.design.DPConfig)"
+    given: bool = False
+
+
 @dataclass(frozen=True, eq=False)
 class DesignConfig:
     """A validated filter/controller configuration (SI units, radians)."""
@@ -219,6 +292,8 @@ class DesignConfig:
     estimator: str = "kf"  # the estimator component (rovlab.sim.components.ESTIMATORS)
     controller: str = "lqg"  # the controller component (rovlab.sim.components.CONTROLLERS)
     mrac: MRACConfig = field(default_factory=MRACConfig)  # the optional [mrac] table
+    ekf: EKFConfig = field(default_factory=EKFConfig)  # the optional [ekf] table
+    dp: DPConfig = field(default_factory=DPConfig)  # the optional [dp] table
 
     @property
     def W(self) -> np.ndarray:
@@ -338,7 +413,8 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
 
     measurements: list[MeasurementConfig] = []
     for mr in top.tables("measurements", min_count=1):
-        measurements.append(_measurement(mr, defaults))
+        # the depth-and-heading filter fuses z, psi, w, r; the 4-DOF EKF x, y, u, v too
+        measurements.append(_measurement(mr, defaults, EKF_MEASURABLE if estimator == "ekf" else MEASURABLE))
     seen: dict[tuple[str | None, str | None, str], str] = {}
     for m in measurements:
         ident = (m.sensor, m.kind, m.quantity)
@@ -361,6 +437,12 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     mrac = _mrac_table(top.table("mrac", required=False), present=top.has("mrac"))
     if mrac.given:
         sources["mrac"] = mrac.source
+    ekf = _ekf_table(top.table("ekf", required=False), present=top.has("ekf"))
+    if ekf.given:
+        sources["ekf"] = ekf.source
+    dp = _dp_table(top.table("dp", required=False), present=top.has("dp"))
+    if dp.given:
+        sources["dp"] = dp.source
     top.finish()
     col.raise_if_any("filter configuration")
 
@@ -371,8 +453,82 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         bias_time_per_mass=per_mass, bias_time_constant=constants, measurements=tuple(measurements),
         initial_state=x0, initial_std=std, lqr_Q=Q, lqr_R=R, lqr_bryson=bryson,
         reference_gain=reference, sources=sources, file=file, estimator=estimator, controller=controller,
-        mrac=mrac,
+        mrac=mrac, ekf=ekf, dp=dp,
     )
+
+
+def _per_key(t: TableReader, name: str, keys: tuple[str, ...], base: np.ndarray, *, factors: tuple[float, ...] | None = None,
+             positive: bool = False, nonnegative: bool = False, what: str = "") -> np.ndarray:
+    """An inline table of numbers per key (missing keys keep ``base``), times ``factors``."""
+    out = np.array(base, dtype=float)
+    sub = t.table(name, required=False)
+    for i, key in enumerate(keys):
+        if sub.has(key):
+            out[i] = sub.number(key, positive=positive, nonnegative=nonnegative, what=what) * (
+                factors[i] if factors else 1.0)
+    sub.finish()
+    return out
+
+
+def _ekf_table(t: TableReader, *, present: bool) -> EKFConfig:
+    """The optional [ekf] table (closed schema; every problem collected)."""
+    base = EKFConfig()
+    if not present:
+        return base
+    source = t.string("source")
+    fpsd = _per_key(t, "force_psd", DOFS, base.force_psd, nonnegative=True, what="N^2/Hz or (N m)^2/Hz")
+    bpsd = _per_key(t, "bias_psd", DOFS, base.bias_psd, nonnegative=True, what="N^2/s per s (PSD of the bias driver)")
+    bT = _per_key(t, "bias_time_constant_s", DOFS, base.bias_time_constant_s, positive=True, what="s")
+    for i, k in enumerate(DOFS):
+        if np.isfinite(bT[i]) and not BIAS_TIME_RANGE[0] <= bT[i] <= BIAS_TIME_RANGE[1]:
+            t.problem(f"bias_time_constant_s.{k}", float(bT[i]), f"a time in [{BIAS_TIME_RANGE[0]:g}, "
+                      f"{BIAS_TIME_RANGE[1]:g}] s")
+    cur = _per_key(t, "current", ("north", "east", "down"), base.current, what="m/s, NED")
+    substeps = t.integer("substeps", base.substeps, lo=1)
+    dead: list[str] = []
+    if t.has("dead_reckoning"):
+        raw = t.raw("dead_reckoning")
+        if not isinstance(raw, list) or not all(isinstance(v, str) and v in EKF_STATES for v in raw):
+            t.problem("dead_reckoning", raw, "a list of EKF states (" + ", ".join(EKF_STATES) + ")")
+        else:
+            dead = list(raw)
+    if substeps > 1000:
+        t.problem("substeps", substeps, "at most 1000 RK4 steps per sample")
+        substeps = base.substeps
+    keys = tuple(_EKF_STATE_KEYS)
+    factors = tuple(f for _, f in _EKF_STATE_KEYS.values())
+    x0 = _per_key(t, "initial_state", keys, base.initial_state / np.array(factors), factors=factors)
+    std = _per_key(t, "initial_std", keys, base.initial_std / np.array(factors), factors=factors, nonnegative=True)
+    t.finish()
+    for arr in (fpsd, bpsd, bT, cur, x0, std):
+        arr.setflags(write=False)
+    return EKFConfig(force_psd=fpsd, bias_psd=bpsd, bias_time_constant_s=bT, current=cur, substeps=substeps,
+                     initial_state=x0, initial_std=std, dead_reckoning=tuple(dead), source=source, given=True)
+
+
+def _dp_table(t: TableReader, *, present: bool) -> DPConfig:
+    """The optional [dp] table (closed schema; every problem collected)."""
+    base = DPConfig()
+    if not present:
+        return base
+    source = t.string("source")
+    axes = ("x", "y", "z", "psi")
+    speed_keys = ("x", "y", "z", "psi_deg_s")
+    bw = _per_key(t, "bandwidth", axes, base.bandwidth, positive=True, what="rad/s")
+    zeta = t.number("damping", base.damping, positive=True, hi=10.0, what="relative damping of the closed loop")
+    ratio = t.number("integral_ratio", base.integral_ratio, nonnegative=True, hi=1.0,
+                     what="K_i = ratio * omega_n * K_p; 0 = no integral action")
+    rbw = _per_key(t, "reference_bandwidth", axes, base.reference_bandwidth, positive=True, what="rad/s")
+    rzeta = t.number("reference_damping", base.reference_damping, positive=True, hi=10.0)
+    speed = _per_key(t, "max_speed", speed_keys, base.max_speed / np.array([1, 1, 1, _DEG]),
+                     factors=(1.0, 1.0, 1.0, _DEG), positive=True, what="m/s, or deg/s for psi_deg_s")
+    aw = t.number("anti_windup", base.anti_windup, nonnegative=True, hi=100.0,
+                  what="back-calculation gain relative to omega_n; 0 = off")
+    t.finish()
+    for arr in (bw, rbw, speed):
+        arr.setflags(write=False)
+    return DPConfig(bandwidth=bw, damping=zeta, integral_ratio=ratio, reference_bandwidth=rbw, reference_damping=rzeta,
+                    max_speed=speed, anti_windup=aw, source=source, given=True)
 
 
 def _state_table(t: TableReader, name: str, keys: Mapping[str, tuple[int, float]], *,
@@ -419,16 +575,17 @@ def _fusion_settings(t: TableReader, base: FusionSettings, col: Collector) -> Fu
     return settings
 
 
-def _measurement(t: TableReader, defaults: FusionSettings) -> MeasurementConfig:
+def _measurement(t: TableReader, defaults: FusionSettings,
+                 quantities: tuple[str, ...] = MEASURABLE) -> MeasurementConfig:
     sensor = t.string("sensor") if t.has("sensor") else None
     kind = t.string("kind", choices=tuple(SENSOR_CHANNELS)) if t.has("kind") else None
     if (sensor is None) == (kind is None):
         t.problem("sensor", "both sensor and kind" if sensor is not None else "neither sensor nor kind",
                   "exactly one of sensor = NAME (a vehicle sensor) and kind = KIND")
-    quantity = t.string("quantity", choices=MEASURABLE)
+    quantity = t.string("quantity", choices=quantities)
     if kind and quantity and quantity not in SENSOR_CHANNELS.get(kind, ()):
         t.problem("quantity", quantity, f"a channel of a {kind} sensor: "
-                  + ", ".join(c for c in SENSOR_CHANNELS[kind] if c in MEASURABLE))
+                  + ", ".join(c for c in SENSOR_CHANNELS[kind] if c in quantities))
     variance = t.number("variance", positive=True, what="SI units squared") if t.has("variance") else None
     source = t.string("source", "")
     fusion = _fusion_settings(t, defaults, t.collector)

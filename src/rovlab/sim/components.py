@@ -10,19 +10,21 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from rovlab.control import lqg, mrac
+from rovlab.control import dp, lqg, mrac
 from rovlab.core.components import ControllerSpec, EstimatorSpec
-from rovlab.estimation import kf
+from rovlab.estimation import ekf, kf
 from rovlab.params.design import DesignConfig
 from rovlab.params.validate import ConfigError, Problem
 from rovlab.params.vehicle import Vehicle
 
 ESTIMATORS: dict[str, Callable[[Vehicle, DesignConfig], EstimatorSpec]] = {
     "kf": kf.build,  # depth-and-heading Kalman filter (Sandøy 2016, sec. 5.1)
+    "ekf": ekf.build,  # 4-DOF extended Kalman filter (Sandøy 2016, further work; rovlab.estimation.ekf)
 }
 CONTROLLERS: dict[str, Callable[[Vehicle, DesignConfig], ControllerSpec]] = {
     "lqg": lqg.build,  # LQR depth and heading with bias feed-forward (Sandøy 2016, sec. 5.2)
     "mrac": mrac.build,  # model-reference adaptive heave control, LQR heading (Sandøy 2016, sec. 5.2)
+    "dp": dp.build,  # dynamic positioning x, y, z, psi (Fossen 2011, nonlinear PID + reference model)
 }
 
 

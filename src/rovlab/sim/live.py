@@ -56,6 +56,8 @@ class LiveSimulation:
         self.rng = np.random.default_rng(self._seed)
         self.rng.standard_normal(4)  # the initial bias draw, as in rovlab.sim.runner.prepare
         self.reference = self.scenario.reference_at(0.0)
+        rx, ry = self.scenario.reference_xy()
+        self.reference_xy = (float(rx[0]), float(ry[0]))  # north, east set-point [m] (position controllers)
         self.reference_follows_scenario = True
         self.sensor_available = {c.sensor: True for c in self.prep.channels}
 
@@ -96,15 +98,19 @@ class LiveSimulation:
         return self.prep.config
 
     # -- commands ----------------------------------------------------------------------------
-    def set_reference(self, z: float | None = None, psi: float | None = None) -> None:
-        """New depth [m] and/or heading [rad] set-point (stops following the scenario's schedule)."""
-        for name, v in (("z", z), ("psi", psi)):
+    def set_reference(self, z: float | None = None, psi: float | None = None, *, x: float | None = None,
+                      y: float | None = None) -> None:
+        """New depth [m], heading [rad] and/or north/east position [m] set-point (stops following the
+        scenario's schedule; x and y matter to position controllers such as "dp")."""
+        for name, v in (("z", z), ("psi", psi), ("x", x), ("y", y)):
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise ValueError(f"reference {name} must be a finite number, got {v!r}")
         if z is not None and z < 0:
             raise ValueError(f"reference depth z must be >= 0 m (the free surface is z = 0), got {z!r}")
         zr, pr = self.reference
         self.reference = (float(z) if z is not None else zr, float(psi) if psi is not None else pr)
+        xr, yr = self.reference_xy
+        self.reference_xy = (float(x) if x is not None else xr, float(y) if y is not None else yr)
         self.reference_follows_scenario = False
 
     def set_sensor_available(self, sensor: str, available: bool) -> None:
@@ -167,8 +173,10 @@ class LiveSimulation:
         dropout, refs = schedule(self.scenario, prep.channels, times, unavailable)
         if self.reference_follows_scenario:
             self.reference = (float(refs[-1, 2]), float(refs[-1, 3]))
+            self.reference_xy = (float(refs[-1, 0]), float(refs[-1, 1]))
         else:
             refs[:, 2], refs[:, 3] = self.reference
+            refs[:, 0], refs[:, 1] = self.reference_xy
         n_sub = prep.plant.n_sub
         normals = draw(self.rng, n, n_sub, plant_draws(prep.plant), len(prep.channels))
         heave, pset = disturbances(self.scenario, times, observer=self.scenario.plant == "observer",

@@ -252,3 +252,86 @@ def dropout_metrics(columns: dict[str, np.ndarray], dropouts: Sequence[Any], *, 
                     "during": drift_during_dropout(columns, start, end),
                     "recovery": recovery_kick(columns, end, window_s=recovery_window_s)})
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# Dynamic positioning (4-DOF estimate, x/y/z/psi references)
+# --------------------------------------------------------------------------------------------
+
+_POSE = ("x", "y", "z", "psi")
+_FOUR_DOF = ("x", "y", "z", "psi", "u", "v", "w", "r")
+
+
+def _err(columns: dict[str, np.ndarray], a: str, b: str, angle: bool) -> np.ndarray:
+    e = np.asarray(columns[a], dtype=float) - np.asarray(columns[b], dtype=float)
+    return wrap(e) if angle else e
+
+
+def positioning_metrics(columns: dict[str, np.ndarray], dropouts: Sequence[Any] = (), *,
+                        observer: bool = False, saturation_tol: float = 1e-6) -> dict[str, Any]:
+    """metrics.json entries of a run with a 4-DOF estimate (time-series columns only):
+
+    * ``rms_error``: RMS of estimate - truth per state (x ... r; biases too on the observer plant);
+    * ``tracking_rms``: RMS of truth - reference per axis (x, y, z in m, psi in rad), against the
+      controller's smooth reference (``ctrl_<axis>_d``, its reference model) where it logs one,
+      else against the set-point ``ref_<axis>``; ``setpoint_error_final``: truth - set-point at the end;
+    * ``thrusters``: mean and largest |PWM - 1500| per thruster [us];
+    * ``saturation``: time [s] and share of the run in which the allocation could not give the
+      demanded wrench (achieved != demanded in any DOF);
+    * ``position_dropouts``: per drop-out window, how far the x/y estimate drifted from the truth
+      (dead reckoning) and the largest horizontal error.
+    """
+    c = columns
+    t = np.asarray(c["time_s"], dtype=float)
+    h = float(t[1] - t[0]) if len(t) > 1 else 0.0
+    out: dict[str, Any] = {}
+    states = [s for s in _FOUR_DOF if f"est_{s}" in c and f"true_{s}" in c]
+    if observer:
+        states += [s for s in ("b_X", "b_Y", "b_Z", "b_N") if f"est_{s}" in c and f"true_{s}" in c]
+    out["rms_error"] = {s: float(rms(_err(c, f"est_{s}", f"true_{s}", s == "psi"))) for s in states}
+    tracking: dict[str, float] = {}
+    final: dict[str, float] = {}
+    against: dict[str, str] = {}
+    for a in _POSE:
+        if f"true_{a}" not in c:
+            continue
+        ref = f"ctrl_{a}_d" if f"ctrl_{a}_d" in c else f"ref_{a}"
+        if ref in c:
+            tracking[a] = float(rms(_err(c, f"true_{a}", ref, a == "psi")))
+            against[a] = ref
+        if f"ref_{a}" in c:
+            final[a] = float(_err(c, f"true_{a}", f"ref_{a}", a == "psi")[-1])
+    out["tracking_rms"] = tracking
+    out["tracking_reference"] = against
+    out["setpoint_error_final"] = final
+    usage = {}
+    for name in c:
+        if name.startswith("pwm_"):
+            off = np.abs(np.asarray(c[name], dtype=float) - 1500.0)
+            usage[name[4:]] = {"mean_abs_pwm_offset_us": float(np.mean(off)), "max_abs_pwm_offset_us": float(np.max(off))}
+    out["thrusters"] = usage
+    sat = np.zeros(len(t), dtype=bool)
+    for d in "XYZN":
+        if f"tau_{d}" in c and f"tau_{d}_demanded" in c:
+            sat |= np.abs(np.asarray(c[f"tau_{d}_demanded"], dtype=float) - np.asarray(c[f"tau_{d}"], dtype=float)) \
+                > saturation_tol * np.maximum(1.0, np.abs(np.asarray(c[f"tau_{d}_demanded"], dtype=float)))
+    out["saturation"] = {"time_s": float(np.count_nonzero(sat) * h), "share": float(np.mean(sat)) if len(t) else 0.0}
+    drops = []
+    if "est_x" in c and "true_x" in c and "est_y" in c and "true_y" in c:
+        ex = _err(c, "est_x", "true_x", False)
+        ey = _err(c, "est_y", "true_y", False)
+        for sensor, start, end in dropout_windows(dropouts):
+            w = (t >= start) & (t < end)
+            if not w.any():
+                continue
+            i0 = int(np.argmax(w))
+            i1 = int(len(w) - 1 - np.argmax(w[::-1]))
+            horiz = np.hypot(ex[w], ey[w])
+            drops.append({"sensor": sensor, "start_s": start, "end_s": end,
+                          "x_drift_m": float(ex[i1] - ex[i0]), "y_drift_m": float(ey[i1] - ey[i0]),
+                          "horizontal_drift_m": float(math.hypot(ex[i1] - ex[i0], ey[i1] - ey[i0])),
+                          "horizontal_error_max_m": float(np.max(horiz)),
+                          "tracking_rms_during": {a: float(rms(_err(c, f"true_{a}", against[a], a == "psi")[w]))
+                                                  for a in against}})
+    out["position_dropouts"] = drops
+    return out

@@ -256,8 +256,8 @@ def schedule(sc: Scenario, channels: tuple[Any, ...], times: np.ndarray,
         if c.sensor in unavailable:
             dropout[:, j] = True
     idx = np.maximum(np.searchsorted(sc.reference_times, times, side="right") - 1, 0)
-    refs = np.column_stack([np.full(len(times), sc.initial[0]), np.full(len(times), sc.initial[1]),
-                            sc.reference_z[idx], sc.reference_psi[idx]])
+    ref_x, ref_y = sc.reference_xy()
+    refs = np.column_stack([ref_x[idx], ref_y[idx], sc.reference_z[idx], sc.reference_psi[idx]])
     return dropout, refs
 
 
@@ -298,6 +298,7 @@ def parameter_sets(truth: Vehicle, sc: Scenario) -> np.ndarray:
         # extra buoyancy (positive = lighter): the scenario's offset plus the events so far
         p[kin.P_BUOY] += db + sc.buoyancy_offset
         p[kin.P_GZ] += db + sc.buoyancy_offset
+        p[kin.P_VC:kin.P_VC + 3] = sc.current  # the ocean current (NED), 0 unless the scenario sets one
         rows.append(p)
     if problems:
         raise ConfigError(problems, "scenario file")
@@ -573,4 +574,6 @@ def summarise(result: SimResult) -> dict[str, Any]:
     # consistency: NEES of the corrected estimate, NIS per used measurement
     out["nees"] = {"states": list(result.nees_states), **mx.consistency(result.nees, len(result.nees_states))}
     out["nis"] = mx.consistency(result.nis, 1)
+    if "est_x" in c:  # a 4-DOF estimate (e.g. estimator "ekf"): the planar and dynamic-positioning numbers
+        out.update(mx.positioning_metrics(c, result.meta["dropouts"], observer=sc.plant == "observer"))
     return out

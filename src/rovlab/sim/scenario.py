@@ -23,7 +23,7 @@ initial state, the reference schedule, drop-out windows, the true disturbances a
     [[reference]]                   # piecewise-constant set-points; a missing entry keeps its value
     t_s = 0.0
     z = 0.70
-    heading_deg = 30.0
+    heading_deg = 30.0              # also x, y [m] (NED; followed by position controllers, "dp")
 
     [[dropout]]                     # no samples from a sensor (or one channel) in [start_s, end_s)
     sensor = "qualisys"             # or "qualisys.z"
@@ -36,6 +36,7 @@ initial state, the reference schedule, drop-out windows, the true disturbances a
     bias_time_constant_s = { heave = 60.0, yaw = 60.0 }
     buoyancy_offset = 0.0           # extra net buoyancy in N (positive = lighter), e.g. a payload
     pwm_resolution_us = 1.0         # ESC command quantisation (0 = none)
+    current = { north = 0.1, east = 0.0, down = 0.0 }   # constant ocean current [m/s], NED (default 0)
     parameters = { mass = 7.6 }     # plant truth differing from the vehicle file (any of
                                     # mass, I_zz, X_udot ... N_rdot, displaced_volume)
 
@@ -62,7 +63,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -95,6 +96,8 @@ BIAS_STD_RANGE = {"surge": (0.0, 1e3), "sway": (0.0, 1e3), "heave": (0.0, 1e3), 
 BIAS_TIME_RANGE = (0.1, 1e8)  # [s]
 BUOYANCY_OFFSET_RANGE = (-1e3, 1e3)  # [N]
 PWM_RESOLUTION_RANGE = (0.0, 100.0)  # [us]
+CURRENT_RANGE = (-5.0, 5.0)  # ocean current per NED axis [m/s]
+CURRENT_KEYS = ("north", "east", "down")
 
 
 @dataclass(frozen=True)
@@ -157,6 +160,16 @@ class Scenario:
     controller: str | None = None
     events: tuple[TruthEvent, ...] = ()  # [[truth.event]], in time order
     tether: Tether = Tether()  # [truth.tether]
+    current: np.ndarray = field(default_factory=lambda: np.zeros(3))  # [truth] current, NED [m/s]
+    reference_x: np.ndarray | None = None  # (k,) north set-point [m] from reference_times (None: initial x)
+    reference_y: np.ndarray | None = None  # (k,) east set-point [m]
+
+    def reference_xy(self) -> tuple[np.ndarray, np.ndarray]:
+        """North and east set-points per reference time (the initial position where none given)."""
+        k = len(self.reference_times)
+        rx = self.reference_x if self.reference_x is not None else np.full(k, float(self.initial[0]))
+        ry = self.reference_y if self.reference_y is not None else np.full(k, float(self.initial[1]))
+        return rx, ry
 
     def reference_at(self, t: float) -> tuple[float, float]:
         k = int(np.searchsorted(self.reference_times, t, side="right")) - 1
@@ -275,10 +288,17 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
     times: list[float] = []
     zs: list[float] = []
     psis: list[float] = []
+    xs: list[float] = []
+    ys: list[float] = []
     z_now = initial[2]
     psi_now = initial[3]
+    x_now, y_now = initial[0], initial[1]
     for r in top.tables("reference", required=False):
         t = r.number("t_s", nonnegative=True)
+        x_now = r.number("x", x_now, plausible=POSITION_RANGE, what="m, north")
+        y_now = r.number("y", y_now, plausible=POSITION_RANGE, what="m, east")
+        xs.append(x_now)
+        ys.append(y_now)
         z_now = r.number("z", z_now, nonnegative=True, plausible=POSITION_RANGE,
                          what="m, depth below the free surface (z = 0; the vehicle cannot be sent above it)")
         psi_now = r.number("heading_deg", psi_now / _DEG, plausible=HEADING_RANGE_DEG) * _DEG
@@ -290,6 +310,7 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
         psis.append(psi_now)
     if not times:
         times, zs, psis = [0.0], [float(initial[2])], [float(initial[3])]
+        xs, ys = [float(initial[0])], [float(initial[1])]
 
     dropouts = []
     for d in top.tables("dropout", required=False):
@@ -311,6 +332,9 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
                           ranges={d: BIAS_TIME_RANGE for d in DOF_NAMES})
     buoy = tr.number("buoyancy_offset", 0.0, plausible=BUOYANCY_OFFSET_RANGE, what="N")
     pwm_res = tr.number("pwm_resolution_us", 1.0, nonnegative=True, plausible=PWM_RESOLUTION_RANGE, what="us")
+    cur = tr.table("current", required=False)
+    current = np.array([cur.number(k, 0.0, plausible=CURRENT_RANGE, what="m/s, NED") for k in CURRENT_KEYS])
+    cur.finish()
     params = tr.table("parameters", required=False)
     truth_params: dict[str, float] = {}
     for key in TRUTH_PARAMETERS:
@@ -333,7 +357,8 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
         reference_times=np.array(times), reference_z=np.array(zs), reference_psi=np.array(psis),
         dropouts=tuple(dropouts), process_noise_psd=psd, bias_std=bias_std, bias_time_constant_s=bias_T,
         buoyancy_offset=buoy, pwm_resolution_us=pwm_res, truth_parameters=truth_params, file=file,
-        estimator=estimator, controller=controller, events=events, tether=tether,
+        estimator=estimator, controller=controller, events=events, tether=tether, current=current,
+        reference_x=np.array(xs), reference_y=np.array(ys),
     )
 
 

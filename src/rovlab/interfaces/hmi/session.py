@@ -10,8 +10,9 @@ Commands are JSON objects ``{"cmd": NAME, ...}`` (an optional ``id`` is echoed i
 ``step``           ``n`` (default 1, at most 100) control steps while paused
 ``reset``          back to the scenario's start (tuned parameters are kept; a new log run begins)
 ``speed``          ``value``: 0.1 .. 50 times real time
-``reference``      ``depth_m`` and/or ``heading_deg`` (degrees at the edge); ``schedule: true``
-                   goes back to the scenario's reference schedule
+``reference``      ``depth_m``, ``heading_deg`` (degrees at the edge), ``north_m`` and/or ``east_m``
+                   (position set-point, for the "dp" controller); ``schedule: true`` goes back to
+                   the scenario's reference schedule
 ``sensor``         ``sensor``: name, ``available``: true/false (simulated drop-out)
 ``filter_mode``    ``channel``: e.g. ``qualisys.z``, ``mode``: auto | off | on
 ``set``            ``target``: vehicle | truth | config, and ``key`` + ``value`` or ``changes``
@@ -143,7 +144,8 @@ class Session:
         ref = st["reference"]
         return {
             "running": self.running, "speed": self.speed, "time_s": st["time_s"],
-            "reference": {"depth_m": ref["z"], "heading_deg": ref["psi"] / _DEG, "schedule": ref["schedule"]},
+            "reference": {"depth_m": ref["z"], "heading_deg": ref["psi"] / _DEG, "north_m": ref.get("x", 0.0),
+                          "east_m": ref.get("y", 0.0), "schedule": ref["schedule"]},
             "sensors": st["sensors"], "filter_modes": st["filter_modes"],
             "sensor_status": dict(self.latest.get("/rovlab/estimate", {}).get("sensors", {})),
             "log": {"rows": self.log.rows, "runs": len(self.log.runs), "folder": str(self.log.folder),
@@ -225,15 +227,24 @@ class Session:
             return Outcome(state_changed=True)
         z = _optional_number(c, "depth_m")
         heading = _optional_number(c, "heading_deg")
-        if z is None and heading is None:
-            raise CommandError("a reference needs depth_m and/or heading_deg (or schedule: true)")
+        north = _optional_number(c, "north_m")
+        east = _optional_number(c, "east_m")
+        if z is None and heading is None and north is None and east is None:
+            raise CommandError("a reference needs depth_m, heading_deg, north_m and/or east_m (or schedule: true)")
         if z is not None and not -100.0 <= z <= 1000.0:
             raise CommandError(f"depth_m must be within -100 .. 1000 m, got {z:g}", key="depth_m")
+        for key, v in (("north_m", north), ("east_m", east)):
+            if v is not None and not -1e4 <= v <= 1e4:
+                raise CommandError(f"{key} must be within -10000 .. 10000 m, got {v:g}", key=key)
         psi = None
         if heading is not None:
             psi = math.remainder(heading * _DEG, 2.0 * math.pi)  # (-pi, pi]
-        self.source.set_reference(z=z, psi=psi)
-        self.log.event(self.source.time, "reference", depth_m=z, heading_deg=heading)
+        if north is None and east is None:  # sources without position set-points keep their two-argument call
+            self.source.set_reference(z=z, psi=psi)
+        else:
+            self.source.set_reference(z=z, psi=psi, x=north, y=east)
+        position = {k: v for k, v in (("north_m", north), ("east_m", east)) if v is not None}
+        self.log.event(self.source.time, "reference", depth_m=z, heading_deg=heading, **position)
         return Outcome(state_changed=True)
 
     def _sensor(self, c: dict) -> Outcome:

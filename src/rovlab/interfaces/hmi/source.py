@@ -15,6 +15,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from rovlab.estimation.fusion import CH_MODE, MODE_NAMES
+from rovlab.models.kinetics import mass_matrix
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
 from rovlab.sim.live import LiveSimulation
@@ -49,7 +50,8 @@ class Source(Protocol):
 
     def reset(self) -> None: ...
 
-    def set_reference(self, z: float | None = None, psi: float | None = None) -> None: ...
+    def set_reference(self, z: float | None = None, psi: float | None = None, *, x: float | None = None,
+                      y: float | None = None) -> None: ...
 
     def follow_schedule(self) -> None:
         """Go back to the scenario's (or mission's) reference schedule."""
@@ -108,9 +110,11 @@ class SimulationSource:
         sim = self.sim
         modes = {name: MODE_NAMES[int(sim.state["chs"][j, CH_MODE])] for j, name in enumerate(sim.channels)}
         z, psi = sim.reference
+        x, y = sim.reference_xy
         return {
             "time_s": sim.time,
-            "reference": {"z": float(z), "psi": float(psi), "schedule": bool(sim.reference_follows_scenario)},
+            "reference": {"z": float(z), "psi": float(psi), "x": float(x), "y": float(y),
+                          "schedule": bool(sim.reference_follows_scenario)},
             "sensors": dict(sim.sensor_available),
             "filter_modes": modes,
         }
@@ -121,8 +125,9 @@ class SimulationSource:
     def reset(self) -> None:
         self.sim.reset()
 
-    def set_reference(self, z: float | None = None, psi: float | None = None) -> None:
-        self.sim.set_reference(z=z, psi=psi)
+    def set_reference(self, z: float | None = None, psi: float | None = None, *, x: float | None = None,
+                      y: float | None = None) -> None:
+        self.sim.set_reference(z=z, psi=psi, x=x, y=y)
 
     def follow_schedule(self) -> None:
         self.sim.reference_follows_scenario = True
@@ -141,20 +146,31 @@ class SimulationSource:
         prep = self.sim.prep
         fm = prep.filter_model
         v, t = prep.vehicle, prep.truth
+        if hasattr(fm, "T_w"):  # the depth-and-heading filter
+            model = {**prep.config.model_values(v), "T_w": fm.T_w, "T_r": fm.T_r, "M_w": fm.params.M_w,
+                     "M_r": fm.params.M_r}
+            W, Q = np.diag(fm.W)[2:], np.diag(fm.Q)
+        else:  # the 4-DOF EKF: its heave and yaw entries in the same shape (W: Z, N, b_Z, b_N)
+            M = np.diag(mass_matrix(v))
+            model = {**prep.config.model_values(v), "T_w": float(1.0 / fm.inv_T[2]), "T_r": float(1.0 / fm.inv_T[3]),
+                     "M_w": float(M[2]), "M_r": float(M[3])}
+            W, Q = fm.W[[2, 3, 6, 7]], np.diag(fm.Q0)
+        ctl = prep.design.controller.model
         out: dict[str, Any] = {
-            "model": {**prep.config.model_values(v), "T_w": fm.T_w, "T_r": fm.T_r,
-                      "M_w": fm.params.M_w, "M_r": fm.params.M_r},
+            "model": model,
             "vehicle": _vehicle_summary(v),
             "truth": _vehicle_summary(t),
-            "W": _floats(np.diag(fm.W)[2:]),
+            "W": _floats(W),
             "R": {c.name: c.variance for c in fm.channels},
-            "Q_diag": _floats(np.diag(fm.Q)),
+            "Q_diag": _floats(Q),
             "lqr_Q": _floats(prep.config.lqr_Q),
             "lqr_R": _floats(prep.config.lqr_R),
-            "K": [_floats(row) for row in prep.K],
-            "P": [_floats(row) for row in prep.Pref],
+            "K": [_floats(row) for row in getattr(ctl, "K", np.zeros((0, 0)))],
+            "P": [_floats(row) for row in getattr(ctl, "P", np.zeros((0, 0)))],
             "controller": _controller_name(prep),
         }
+        if hasattr(ctl, "Kp"):  # the DP controller: its gains per axis x, y, z, psi
+            out["dp"] = {"Kp": _floats(ctl.Kp), "Ki": _floats(ctl.Ki), "Kd": _floats(ctl.Kd), "M": _floats(ctl.M)}
         summary = getattr(prep.design.controller.model, "summary", None)
         if callable(summary):  # an adaptive controller's design (MRAC: reference model, gains, bounds)
             out["mrac"] = summary()

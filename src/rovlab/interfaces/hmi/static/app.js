@@ -183,6 +183,8 @@
     b_w: { title: "heave bias b_w", unit: "N", k: 1, minSpan: 0.5 },
     b_r: { title: "yaw bias b_r", unit: "N m", k: 1, minSpan: 0.01 },
   };
+  // the 4-DOF estimator's heave and yaw biases are the depth-and-heading filter's b_w and b_r
+  const STATE_ALIAS = { b_Z: "b_w", b_N: "b_r" };
   let chartList = [];
   let channelsByColumn = {};
   let chartSignature = "";
@@ -225,6 +227,17 @@
     }
     renderLegend();
     for (const ch of src.channels) channelsByColumn[ch.column] = ch;
+    if ((src.states || []).includes("x") && (src.states || []).includes("y")) {  // a 4-DOF estimate: the xy track
+      const canvas = el("canvas", { "aria-label": "xy track" });
+      grid.appendChild(el("div", { class: "chart track", dataset: { chart: "track" } }, canvas));
+      const tr = new RovPlot.TrackPlot(canvas, { title: "xy track (north up)", minSpan: 0.5 });
+      if (src.has_truth) tr.add({ name: "truth", label: "truth", color: COLORS.truth, width: 1.4 });
+      tr.add({ name: "est", label: "estimate", color: COLORS.est, width: 1.4 });
+      if (cs.includes("x_d")) tr.add({ name: "ref_model", label: "reference model", color: COLORS.ref, dash: [2, 3], width: 1.2 });
+      tr.add({ name: "setpoint", label: "set-point", color: COLORS.ref, marker: true });
+      hmi.charts.track = tr;
+      chartList.push(tr);
+    }
     make("tau_Z", { title: "heave force τ_Z", unit: "N", minSpan: 0.5 }).add({ name: "v", label: "allocated", color: "#2f6fd6", legend: false });
     make("tau_N", { title: "yaw moment τ_N", unit: "N m", minSpan: 0.01 }).add({ name: "v", label: "allocated", color: "#2f6fd6", legend: false });
     const pwm = make("pwm", { title: "thruster commands", unit: "µs", minSpan: 20 });
@@ -273,19 +286,22 @@
     for (const [topic, m] of msg.messages) {
       const t = m.t;
       hmi.stats.messages++;
+      if (charts.track) pushTrack(charts.track, topic, m);
       if (topic === "/rovlab/truth") {
-        for (const [k, v] of Object.entries(m.state)) {
+        for (const [name, v] of Object.entries(m.state)) {
+          const k = STATE_ALIAS[name] || name;
           const spec = STATE_CHARTS[k];
           if (spec && v !== null) charts[k].push("truth", t, v * spec.k);
         }
         if (charts.mrac_F && m.state.b_w !== undefined && m.state.b_w !== null) charts.mrac_F.push("truth", t, m.state.b_w);
       } else if (topic === "/rovlab/estimate") {
-        for (const [k, v] of Object.entries(m.state)) {
+        for (const [name, v] of Object.entries(m.state)) {
+          const k = STATE_ALIAS[name] || name;
           const spec = STATE_CHARTS[k];
           if (!spec || v === null) continue;
           const x = v * spec.k;
           charts[k].push("est", t, x);
-          const variance = m.variance[k];
+          const variance = m.variance[name];
           if (variance !== null && variance !== undefined && variance >= 0) {
             const s = 2 * Math.sqrt(variance) * spec.k;
             charts[k].pushBand("band", t, x - s, x + s);
@@ -317,6 +333,15 @@
       if (!(t < hmi.stats.lastT)) hmi.stats.lastT = t;
     }
     clockDirty = true;
+  }
+
+  // the xy track: north/east pairs from the truth, the estimate, the reference and the DP reference model
+  function pushTrack(track, topic, m) {
+    const pair = (o, a, b) => (o && o[a] !== undefined && o[a] !== null && o[b] !== undefined && o[b] !== null);
+    if (topic === "/rovlab/truth" && pair(m.state, "x", "y")) track.push("truth", m.state.x, m.state.y);
+    else if (topic === "/rovlab/estimate" && pair(m.state, "x", "y")) track.push("est", m.state.x, m.state.y);
+    else if (topic === "/rovlab/reference" && pair(m.state, "x", "y")) track.push("setpoint", m.state.x, m.state.y);
+    else if (topic === "/rovlab/command" && pair(m.controller, "x_d", "y_d")) track.push("ref_model", m.controller.x_d, m.controller.y_d);
   }
 
   // draw at most 10 times a second, only what changed
@@ -390,11 +415,18 @@
     }
   }
 
+  const REF_FIELDS = [["ref-north", "north_m"], ["ref-east", "east_m"], ["ref-depth", "depth_m"], ["ref-heading", "heading_deg"]];
+  function positionControl() { return hmi.source && hmi.source.controller === "dp"; }
+
   function renderReference() {
     const ref = hmi.state.reference;
-    $("ref-now").textContent = `now ${short(ref.depth_m, 3)} m, ${short(ref.heading_deg, 3)}° ` +
-      (ref.schedule ? "(scenario schedule)" : "(set by hand)");
-    for (const [id, v] of [["ref-depth", ref.depth_m], ["ref-heading", ref.heading_deg]]) {
+    const dp = positionControl();
+    for (const id of ["ref-north-label", "ref-east-label"]) $(id).hidden = !dp;
+    $("ref-now").textContent = "now " + (dp ? `north ${short(ref.north_m, 3)} m, east ${short(ref.east_m, 3)} m, ` : "") +
+      `${short(ref.depth_m, 3)} m, ${short(ref.heading_deg, 3)}° ` + (ref.schedule ? "(scenario schedule)" : "(set by hand)");
+    for (const [id, key] of REF_FIELDS) {
+      const v = ref[key];
+      if (v === undefined) continue;
       const input = $(id);
       if (document.activeElement !== input && !input.classList.contains("bad")) input.value = short(v, 4);
     }
@@ -402,7 +434,8 @@
 
   function setReference() {
     const args = {};
-    for (const [id, key] of [["ref-depth", "depth_m"], ["ref-heading", "heading_deg"]]) {
+    for (const [id, key] of REF_FIELDS) {
+      if ((key === "north_m" || key === "east_m") && !positionControl()) continue;
       const raw = $(id).value.trim();
       if (raw === "") continue;
       const v = Number(raw);
@@ -411,11 +444,11 @@
     const m = $("ref-msg");
     send("reference", args).then(() => {
       m.textContent = "";
-      $("ref-depth").classList.remove("bad"); $("ref-heading").classList.remove("bad");
+      for (const [id] of REF_FIELDS) $(id).classList.remove("bad");
     }).catch((e) => {
       m.textContent = e.message;
-      const id = e.key === "heading_deg" ? "ref-heading" : "ref-depth";
-      $(id).classList.add("bad");
+      const hit = REF_FIELDS.find(([, key]) => key === e.key);
+      $(hit ? hit[0] : "ref-depth").classList.add("bad");
     });
   }
 
@@ -783,6 +816,14 @@
         `sampled loop spectral radius ${short(a.sampled_radius, 3)}; a ${short(a.max_step)} m step takes ` +
         `${short(a.heave_force_needed[0], 3)} N down / ${short(a.heave_force_needed[1], 3)} N`;
     }
+    if (loop.dp) {  // dynamic positioning: the PID gains per axis (Fossen 2011, pole placement)
+      const g = loop.dp;
+      const axes = ["x", "y", "z", "ψ"];
+      $("loop-lqr").textContent = "DP: τ = M ν̇_d + D(ν_d) ν_d − Rᵀ(K_p e + K_i ∫e) − K_d ν̃ − b̂\n" +
+        "axis          M        K_p        K_i        K_d\n" +
+        axes.map((a, i) => a.padEnd(4) + [g.M[i], g.Kp[i], g.Ki[i], g.Kd[i]].map((x) => short(x, 4).padStart(11)).join("")).join("\n");
+      return;
+    }
     $("loop-lqr").textContent =
       (loop.mrac ? "heading: N = P r − K x − b̂_N (LQR row N)\n" : "τ = P r − K x − b̂\n") +
       "K (rows Z, N; columns z, ψ, w, r)\n" + loop.K.map(row).join("\n") +
@@ -924,7 +965,7 @@
     $("btn-reset").addEventListener("click", () => send("reset").catch((e) => toast(e.message, true)));
     $("speed").addEventListener("change", (ev) => send("speed", { value: Number(ev.target.value) }).catch((e) => toast(e.message, true)));
     $("ref-set").addEventListener("click", setReference);
-    for (const id of ["ref-depth", "ref-heading"]) {
+    for (const id of ["ref-north", "ref-east", "ref-depth", "ref-heading"]) {
       $(id).addEventListener("keydown", (ev) => { if (ev.key === "Enter") setReference(); });
     }
     $("ref-schedule").addEventListener("click", () => send("reference", { schedule: true }).catch((e) => toast(e.message, true)));

@@ -332,5 +332,117 @@
     }
   }
 
-  global.RovPlot = { StripChart, niceStep, fmt };
+  // A TrackPlot shows the horizontal track seen from above (NED: north up, east to the right)
+  // with equal scales on both axes: a few polylines (truth, estimate, reference) of the last
+  // `capacity` points each, and markers for the current set-point. Same interface as StripChart
+  // for the page: push(name, north, east), clear(), draw(), dirty.
+  class TrackPlot {
+    constructor(canvas, opts) {
+      this.canvas = canvas;
+      this.ctx = canvas.getContext("2d");
+      this.title = opts.title || "";
+      this.minSpan = opts.minSpan || 1.0;
+      this.capacity = opts.capacity || 3000;
+      this.series = [];
+      this.byName = {};
+      this.dirty = true;
+      this.cssWidth = 0;
+      this.cssHeight = 0;
+      this.points = 0; // points drawn in the last draw (tests read it)
+    }
+    add(opts) {
+      const s = { name: opts.name, label: opts.label || opts.name, color: opts.color || "#333",
+                  width: opts.width || 1.5, dash: opts.dash || null, marker: !!opts.marker,
+                  ring: new Ring(this.capacity, 2) };
+      this.series.push(s);
+      this.byName[s.name] = s;
+      this.dirty = true;
+      return s;
+    }
+    get(name) { return this.byName[name]; }
+    push(name, north, east) {
+      const s = this.byName[name];
+      if (s === undefined || !isFinite(north) || !isFinite(east)) return;
+      s.ring.push(s.ring.length, north, east);
+      this.dirty = true;
+    }
+    clear() {
+      for (const s of this.series) s.ring.clear();
+      this.dirty = true;
+    }
+    resize() { return StripChart.prototype.resize.call(this); }
+    draw() {
+      if (!this.resize()) return false;
+      const ctx = this.ctx, W = this.cssWidth, H = this.cssHeight;
+      ctx.clearRect(0, 0, W, H);
+      const pad = { l: 46, r: 10, t: 20, b: 30 };
+      let nMin = Infinity, nMax = -Infinity, eMin = Infinity, eMax = -Infinity, count = 0;
+      for (const s of this.series) {
+        const r = s.ring;
+        for (let k = 0; k < r.length; k++) {
+          const i = r.index(k);
+          const n = r.v[2 * i], e = r.v[2 * i + 1];
+          if (n < nMin) nMin = n; if (n > nMax) nMax = n;
+          if (e < eMin) eMin = e; if (e > eMax) eMax = e;
+          count++;
+        }
+      }
+      ctx.font = TITLE_FONT;
+      ctx.fillStyle = "#222";
+      ctx.fillText(this.title, pad.l, 13);
+      this.points = count;
+      if (count === 0) { this.dirty = false; return true; }
+      const pw = W - pad.l - pad.r, ph = H - pad.t - pad.b;
+      const span = Math.max(this.minSpan, (nMax - nMin) * 1.15, (eMax - eMin) * 1.15 * ph / Math.max(pw, 1));
+      const scale = ph / span; // pixels per metre, the same on both axes
+      const nMid = 0.5 * (nMin + nMax), eMid = 0.5 * (eMin + eMax);
+      const X = (e) => pad.l + pw / 2 + (e - eMid) * scale;
+      const Y = (n) => pad.t + ph / 2 - (n - nMid) * scale;
+      // grid
+      const step = niceStep(span, 5);
+      ctx.strokeStyle = "#e3e3e3";
+      ctx.lineWidth = 1;
+      ctx.font = FONT;
+      ctx.fillStyle = "#666";
+      for (let n = Math.ceil((nMid - span / 2) / step) * step; n <= nMid + span / 2; n += step) {
+        ctx.beginPath(); ctx.moveTo(pad.l, Y(n)); ctx.lineTo(W - pad.r, Y(n)); ctx.stroke();
+        ctx.fillText(fmt(Math.abs(n) < 1e-9 * step ? 0 : n, step), 4, Y(n) + 4);
+      }
+      const eSpan = pw / scale;
+      for (let e = Math.ceil((eMid - eSpan / 2) / step) * step; e <= eMid + eSpan / 2; e += step) {
+        ctx.beginPath(); ctx.moveTo(X(e), pad.t); ctx.lineTo(X(e), H - pad.b); ctx.stroke();
+        ctx.fillText(fmt(Math.abs(e) < 1e-9 * step ? 0 : e, step), X(e) - 8, H - pad.b + 13);
+      }
+      ctx.fillText("east [m] →", W - pad.r - 70, H - 4);
+      ctx.save();
+      ctx.translate(11, pad.t + ph / 2 + 30);
+      ctx.rotate(-Math.PI / 2);
+      ctx.fillText("north [m] →", 0, 0);
+      ctx.restore();
+      for (const s of this.series) {
+        const r = s.ring;
+        if (r.length === 0) continue;
+        ctx.strokeStyle = s.color;
+        ctx.fillStyle = s.color;
+        ctx.lineWidth = s.width;
+        ctx.setLineDash(s.dash || []);
+        if (s.marker) {
+          const i = r.index(r.length - 1);
+          ctx.fillRect(X(r.v[2 * i + 1]) - 4, Y(r.v[2 * i]) - 4, 8, 8);
+        } else {
+          ctx.beginPath();
+          for (let k = 0; k < r.length; k++) {
+            const i = r.index(k);
+            if (k === 0) ctx.moveTo(X(r.v[2 * i + 1]), Y(r.v[2 * i])); else ctx.lineTo(X(r.v[2 * i + 1]), Y(r.v[2 * i]));
+          }
+          ctx.stroke();
+        }
+        ctx.setLineDash([]);
+      }
+      this.dirty = false;
+      return true;
+    }
+  }
+
+  global.RovPlot = { StripChart, TrackPlot, niceStep, fmt };
 })(window);

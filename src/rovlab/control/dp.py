@@ -1,0 +1,217 @@
+"""Dynamic positioning in x, y, z and psi: nonlinear PID with a third-order reference model,
+acceleration feed-forward, bias feed-forward from the estimator and back-calculation anti-windup
+(controller slot; the thesis's further work, Sandøy 2016 sec. 6).
+
+The design is the textbook DP controller of Fossen (2011), Handbook of Marine Craft Hydrodynamics
+and Motion Control, Wiley:
+
+* **Reference model** (Fossen 2011, sec. 10.2): per axis a first-order low-pass filter in cascade
+  with a mass-damper-spring, i.e. the third-order model
+
+      eta_d''' + (2 zeta + 1) omega eta_d'' + (2 zeta + 1) omega^2 eta_d' + omega^3 eta_d = omega^3 r
+
+  with the velocity saturated at ``max_speed`` (Fossen's saturating element), so that a set-point
+  step becomes a smooth, feasible trajectory (position, velocity, acceleration). It is started at
+  the first estimate the controller sees; the heading reference takes the short way round.
+* **Nonlinear PID** (Fossen 2011, sec. 12.2, PID control for DP, with gains by pole
+  placement on the decoupled mass-damper of each axis): with the NED error
+  e = eta_hat - eta_d (heading wrapped) and the body velocity error nu_tilde = nu_hat - R(psi)^T eta_d',
+
+      tau = M nu_d' + D(nu_d) nu_d                             (feed-forward of the reference)
+            - R(psi)^T (K_p e + K_i int e) - K_d nu_tilde        (PID, the integral kept in NED)
+            - b_hat                                              (bias feed-forward)
+
+  nu_d = R(psi)^T eta_d' and nu_d' ~ R(psi)^T eta_d'' in surge and sway; D(nu_d) the model's linear,
+  quadratic and cubic damping (at 20 deg/s of turn uDrone's quadratic yaw damping alone needs
+  0.19 N m, which the PID would otherwise meet with a heading error);
+  K_p = M omega_n^2, K_d = 2 zeta omega_n M - D_L, K_i = (omega_n / 10) K_p (the rule of thumb
+  K_i ~ omega_n / 10 K_p; ``integral_ratio``). M = diag(m - X_udot, m - Y_vdot, m - Z_wdot,
+  I_zz - N_rdot), D_L = -diag(X_u, Y_v, Z_w, N_r). The bias is **subtracted**: it enters the model
+  like a force (SPEC sec. 11, the thesis's eq. 5.29 erratum). Keeping the integral in NED means a
+  constant current's force does not have to be re-learnt after every heading change.
+* **Anti-windup** by back-calculation (Astrom & Hagglund 2006, Advanced PID Control, sec. 3.5):
+  when the allocation achieves tau_a != tau_d (thrusters saturated), the integral moves so the PID
+  output approaches what was achieved: int e' = e - (k_t / K_i) R(psi) (tau_a - tau_d),
+  k_t = anti_windup * omega_n.
+
+State (logged as ctrl_<name>): the reference model (eta_d, eta_d', eta_d''), the NED integral,
+the last NED error and a started flag.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from rovlab.core.angles import wrap_angle
+from rovlab.core.components import ControllerSpec, register_controller
+from rovlab.models import kinetics as kin
+from rovlab.params.design import DP_AXES, DesignConfig, DPConfig
+from rovlab.params.validate import ConfigError, Problem
+from rovlab.params.vehicle import Vehicle
+
+STATE_NAMES = (
+    *(f"{a}_d" for a in DP_AXES), *(f"{a}_d_dot" for a in DP_AXES), *(f"{a}_d_ddot" for a in DP_AXES),
+    *(f"int_{a}" for a in DP_AXES), *(f"e_{a}" for a in DP_AXES), "started",
+)
+_ETA, _VEL, _ACC, _INT, _ERR, _STARTED = 0, 4, 8, 12, 16, 20
+_REF_SUBSTEPS = 10  # Euler substeps of the reference model per sample
+
+
+class DP(NamedTuple):
+    """The DP law as a component: gains and model diagonals (4 each, axes x, y, z, psi)."""
+
+    Kp: np.ndarray
+    Ki: np.ndarray
+    Kd: np.ndarray
+    M: np.ndarray  # diagonal inertia (with added mass)
+    D: np.ndarray  # diagonal linear damping (positive)
+    Dq: np.ndarray  # diagonal quadratic damping (positive)
+    Dc: np.ndarray  # diagonal cubic damping (positive)
+    omega_r: np.ndarray  # reference-model natural frequencies [rad/s]
+    zeta_r: float
+    v_max: np.ndarray  # reference-model speed limits (m/s, rad/s)
+    k_t: np.ndarray  # back-calculation gains [1/s] (0 = off)
+    h: float
+    state: np.ndarray  # (21): see STATE_NAMES
+
+
+@njit(cache=True)
+def reference_model_step(eta, vel, acc, r, omega, zeta, v_max, h, n_sub):
+    """Advance one axis of the third-order reference model over h (n_sub Euler substeps, in place
+    on the 1-element views eta, vel, acc) toward the set-point r, speed limited to v_max."""
+    dt = h / n_sub
+    k = 2.0 * zeta + 1.0
+    for _ in range(n_sub):
+        jerk = omega ** 3 * (r - eta[0]) - k * omega ** 2 * vel[0] - k * omega * acc[0]
+        acc[0] += dt * jerk
+        vel[0] += dt * acc[0]
+        if vel[0] > v_max:
+            vel[0] = v_max
+            if acc[0] > 0.0:
+                acc[0] = 0.0
+        elif vel[0] < -v_max:
+            vel[0] = -v_max
+            if acc[0] < 0.0:
+                acc[0] = 0.0
+        eta[0] += dt * vel[0]
+
+
+@njit(cache=True, inline="always")
+def _damping(ctrl, i, v):
+    """The model's damping force of axis i at the reference velocity v (feed-forward)."""
+    return (ctrl.D[i] + ctrl.Dq[i] * abs(v) + ctrl.Dc[i] * v * v) * v
+
+
+@njit(cache=True, inline="always")
+def _dp_step(ctrl, t, nav, ref, tau):
+    s = ctrl.state
+    psi = nav[3]
+    c, sn = math.cos(psi), math.sin(psi)
+    if s[_STARTED] == 0.0:  # start the reference model where the vehicle is
+        for i in range(4):
+            s[_ETA + i] = nav[i]
+            s[_VEL + i] = 0.0
+            s[_ACC + i] = 0.0
+            s[_INT + i] = 0.0
+        s[_STARTED] = 1.0
+    # NED errors (heading wrapped) against the reference model's pose
+    e = np.empty(4)
+    for i in range(3):
+        e[i] = nav[i] - s[_ETA + i]
+    e[3] = wrap_angle(nav[3] - s[_ETA + 3])
+    for i in range(4):
+        s[_ERR + i] = e[i]
+    # NED force of position and integral terms, and the reference's velocity/acceleration, in body axes
+    fx = ctrl.Kp[0] * e[0] + ctrl.Ki[0] * s[_INT + 0]
+    fy = ctrl.Kp[1] * e[1] + ctrl.Ki[1] * s[_INT + 1]
+    vx, vy = s[_VEL + 0], s[_VEL + 1]
+    ax, ay = s[_ACC + 0], s[_ACC + 1]
+    u_d = c * vx + sn * vy
+    v_d = -sn * vx + c * vy
+    du_d = c * ax + sn * ay
+    dv_d = -sn * ax + c * ay
+    tau[0] = (ctrl.M[0] * du_d + _damping(ctrl, 0, u_d) - (c * fx + sn * fy) - ctrl.Kd[0] * (nav[4] - u_d) - nav[8])
+    tau[1] = (ctrl.M[1] * dv_d + _damping(ctrl, 1, v_d) - (-sn * fx + c * fy) - ctrl.Kd[1] * (nav[5] - v_d) - nav[9])
+    tau[2] = (ctrl.M[2] * s[_ACC + 2] + _damping(ctrl, 2, s[_VEL + 2]) - ctrl.Kp[2] * e[2] - ctrl.Ki[2] * s[_INT + 2]
+              - ctrl.Kd[2] * (nav[6] - s[_VEL + 2]) - nav[10])
+    tau[3] = (ctrl.M[3] * s[_ACC + 3] + _damping(ctrl, 3, s[_VEL + 3]) - ctrl.Kp[3] * e[3] - ctrl.Ki[3] * s[_INT + 3]
+              - ctrl.Kd[3] * (nav[7] - s[_VEL + 3]) - nav[11])
+    # advance the reference model toward the set-point (heading: the short way round)
+    for i in range(4):
+        r = ref[i]
+        if i == 3:
+            r = s[_ETA + 3] + wrap_angle(ref[3] - s[_ETA + 3])
+        reference_model_step(s[_ETA + i:_ETA + i + 1], s[_VEL + i:_VEL + i + 1], s[_ACC + i:_ACC + i + 1], r,
+                             ctrl.omega_r[i], ctrl.zeta_r, ctrl.v_max[i], ctrl.h, _REF_SUBSTEPS)
+    s[_ETA + 3] = wrap_angle(s[_ETA + 3])
+
+
+@njit(cache=True, inline="always")
+def _dp_actuated(ctrl, t, tau_demanded, tau_achieved):
+    s = ctrl.state
+    # the shortfall of the allocation (body) in NED, for the back-calculation
+    psi = s[_ETA + 3] + s[_ERR + 3]  # the estimated heading (to one reference-model step)
+    c, sn = math.cos(psi), math.sin(psi)
+    dx = tau_achieved[0] - tau_demanded[0]
+    dy = tau_achieved[1] - tau_demanded[1]
+    d = np.empty(4)
+    d[0] = c * dx - sn * dy
+    d[1] = sn * dx + c * dy
+    d[2] = tau_achieved[2] - tau_demanded[2]
+    d[3] = tau_achieved[3] - tau_demanded[3]
+    for i in range(4):
+        if ctrl.Ki[i] > 0.0:
+            # PID output u = -(K_p e + K_i xi): xi' = e - (k_t / K_i) d moves u toward what was achieved
+            s[_INT + i] += ctrl.h * (s[_ERR + i] - ctrl.k_t[i] / ctrl.Ki[i] * d[i])
+
+
+register_controller(DP, state=("state",), step=_dp_step, actuated=_dp_actuated)
+
+
+@dataclass(frozen=True, eq=False)
+class DPDesign:
+    """The gains of a DP design and where they came from (for display and tests)."""
+
+    Kp: np.ndarray
+    Ki: np.ndarray
+    Kd: np.ndarray
+    M: np.ndarray
+    D: np.ndarray
+    config: DPConfig
+
+
+def design(vehicle: Vehicle, config: DesignConfig) -> DPDesign:
+    """Pole placement per axis (Fossen 2011, sec. 12.2): K_p = M omega_n^2,
+    K_d = 2 zeta omega_n M - D, K_i = integral_ratio omega_n K_p. Raises ConfigError when an axis
+    would need negative derivative gain (its own damping already exceeds the design's)."""
+    dc = config.dp
+    M = np.diag(kin.mass_matrix(vehicle)).copy()
+    D = -np.asarray(vehicle.damping_linear, dtype=float)
+    wn = np.asarray(dc.bandwidth, dtype=float)
+    Kp = M * wn ** 2
+    Kd = 2.0 * dc.damping * wn * M - D
+    Ki = dc.integral_ratio * wn * Kp
+    bad = [a for a, k in zip(DP_AXES, Kd) if not k >= 0.0]
+    if bad:
+        raise ConfigError([Problem(config.file or config.name, "dp.bandwidth", {a: float(w) for a, w in zip(DP_AXES, wn)},
+                                   f"a bandwidth for which 2 zeta omega_n M exceeds the vehicle's own damping on "
+                                   f"{', '.join(bad)} (raise the bandwidth or the damping)")], "filter configuration")
+    return DPDesign(Kp, Ki, Kd, M, D, dc)
+
+
+def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:
+    """The DP component of a configuration (raises ConfigError)."""
+    d = design(vehicle, config)
+    dc = config.dp
+    kernel = DP(d.Kp, d.Ki, d.Kd, d.M, d.D, -np.asarray(vehicle.damping_quadratic, dtype=float),
+                -np.asarray(vehicle.damping_cubic, dtype=float), np.array(dc.reference_bandwidth, dtype=float),
+                float(dc.reference_damping),
+                np.array(dc.max_speed, dtype=float), dc.anti_windup * np.asarray(dc.bandwidth, dtype=float),
+                float(config.sample_time), np.zeros(len(STATE_NAMES)))
+    return ControllerSpec(kernel=kernel, needs=("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N"),
+                          references=DP_AXES, outputs=("X", "Y", "Z", "N"), state_names=STATE_NAMES, model=d)

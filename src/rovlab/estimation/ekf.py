@@ -1,0 +1,356 @@
+"""The 4-DOF extended Kalman filter (the thesis's further work, Sandøy 2016 sec. 6 and appendix)
+as a closed-loop component (estimator slot).
+
+State x = [x, y, z, psi, u, v, w, r, b_X, b_Y, b_Z, b_N] (the layout rovlab.core.components.TRUTH):
+pose in NED, velocity over ground in the body frame, and a first-order Gauss-Markov force/moment
+bias per DOF for what the model leaves out (buoyancy error, tether, unknown current):
+
+    eta_dot = J(psi) nu
+    nu_dot  = f(eta, nu, tau + b + w_f)        (rovlab.models.kinetics.rhs_into, the plant's own model)
+    b_dot   = -T^-1 b + w_b                     w_f, w_b white, power spectral densities W_f, W_b
+
+Prediction over one sample h (the input tau held, zero-order hold):
+
+* the state by classical RK4 on the 12-state model in ``substeps`` steps (the bias decays inside
+  the integration, so a linear model is integrated to O(h^5) per substep);
+* the covariance with the Jacobian A = df/dx at the corrected estimate (the compiled analytic
+  :func:`rovlab.models.kinetics.jacobian_into`, extended by the bias columns M^-1 and -T^-1) and
+  Van Loan's method for Phi = e^{A h} and the discrete process noise
+  Q = int_0^h e^{A s} E W E^T e^{A^T s} ds (Van Loan 1978, IEEE TAC 23(3); the matrix exponential by
+  Pade (6, 6) with scaling and squaring, Golub & Van Loan 2013, Matrix Computations, alg. 9.3.1):
+  P = Phi P Phi^T + Q (not Phi P Phi^T + Gamma Q Gamma^T: the thesis's erratum, SPEC sec. 11).
+
+Correction: every sensor of the 4-DOF model is linear in this state (motion capture x, y, z, psi;
+pressure depth with the lever arm z_VO = z_sensor - l_z at zero roll and pitch; IMU heading and
+yaw rate; a bottom-locked DVL's u, v, w), so the correction is the depth-and-heading filter's
+own: the shared kernel :func:`rovlab.estimation.kalman.correct_arrays` with its sensor management
+(timeouts, innovation gating, gradual recovery, manual on/off) and Joseph-form updates, psi
+innovations wrapped. On a linear model this filter is therefore the linear Kalman filter
+(tests/estimation/test_ekf.py shows it to 1e-9).
+
+:func:`build` refuses a sensor set that does not observe the state (local observability of the
+linearisation at the initial state; ``[ekf] dead_reckoning`` lists states the user accepts to
+dead-reckon, e.g. x and y without a position fix).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+from scipy.linalg import expm
+
+from rovlab.core.angles import wrap_angle
+from rovlab.core.components import EstimatorSpec, register_estimator
+from rovlab.estimation.fusion import new_channel_state
+from rovlab.estimation.kalman import correct_arrays, work_size
+from rovlab.estimation.model import channel_config, make_channels, observability, startup_time, unobservable_problem
+from rovlab.models import kinetics as kin
+from rovlab.params.design import EKF_STATES, DesignConfig
+from rovlab.params.validate import ConfigError, Problem
+from rovlab.params.vehicle import Vehicle
+
+N_X = 12
+STATE_OF_QUANTITY = {q: i for i, q in enumerate(EKF_STATES[:8])}
+_PSI = 3
+
+
+class EKF(NamedTuple):
+    """The 4-DOF EKF: constants (packed model, noise, channels) and state (x, P, ch)."""
+
+    p: np.ndarray  # packed model (rovlab.models.kinetics.pack), with the known current if any
+    inv_T: np.ndarray  # (4) 1 / bias time constants [1/s]
+    W: np.ndarray  # (8) PSD of the force noise (X, Y, Z, N) and of the bias drivers
+    h: float  # sample time [s]
+    n_sub: int  # RK4 steps per sample
+    H: np.ndarray  # (m, 12)
+    cfg: np.ndarray  # channel configuration (rovlab.estimation.fusion CFG_*)
+    wrap: np.ndarray  # bool (12): psi
+    x: np.ndarray  # (12) estimate
+    P: np.ndarray  # (12, 12) covariance
+    ch: np.ndarray  # (m, N_CH) sensor-management state
+    work: np.ndarray  # correction scratch (rovlab.estimation.kalman.work_size)
+    A: np.ndarray  # (12, 12) work: the Jacobian
+    A8: np.ndarray  # (8, 8) work
+    F: np.ndarray  # (24, 24) work: Van Loan's matrix
+    k: np.ndarray  # (4, 12) work: RK4 stages
+    xs: np.ndarray  # (12) work
+    f: np.ndarray  # (4) work: the force tau + b
+
+
+# --------------------------------------------------------------------------------------------
+# Compiled kernels
+# --------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def expm_pade(A):
+    """e^A by the (6, 6) Pade approximant with scaling and squaring (Golub & Van Loan 2013,
+    alg. 9.3.1): ||A / 2^j||_inf <= 1/2 makes the approximant accurate to about 1e-16 relative."""
+    n = A.shape[0]
+    norm = 0.0
+    for i in range(n):
+        s = 0.0
+        for j in range(n):
+            s += abs(A[i, j])
+        norm = max(norm, s)
+    j = 0
+    if norm > 0.5:
+        j = int(math.ceil(math.log2(norm / 0.5)))
+    As = A / (2.0 ** j)
+    q = 6
+    c = 1.0
+    X = np.eye(n)
+    N = np.eye(n)
+    D = np.eye(n)
+    sign = 1.0
+    for k in range(1, q + 1):
+        c = c * (q - k + 1) / ((2 * q - k + 1) * k)
+        X = As @ X
+        sign = -sign
+        N += c * X
+        D += (sign * c) * X
+    E = np.ascontiguousarray(np.linalg.solve(D, N))
+    for _ in range(j):
+        E = E @ E
+    return E
+
+
+@njit(cache=True, inline="always")
+def _rhs12(p, inv_T, x, f, tau, out, w8):
+    """Time derivative of the 12-state model (x: eta, nu, b) with the input tau into out; w8 (8) work."""
+    for i in range(4):
+        f[i] = tau[i] + x[8 + i]
+    kin.rhs_into(p, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], f[0], f[1], f[2], f[3], w8)
+    for i in range(8):
+        out[i] = w8[i]
+    for i in range(4):
+        out[8 + i] = -inv_T[i] * x[8 + i]
+
+
+@njit(cache=True)
+def propagate_state(p, inv_T, x, tau, h, n_sub, k, xs, f):
+    """x <- x(t + h) by n_sub classical RK4 steps of the 12-state model (in place); k (4, 12) and
+    xs (12) are work, f (4) too."""
+    dt = h / n_sub
+    w8 = np.empty(8)
+    for _ in range(n_sub):
+        _rhs12(p, inv_T, x, f, tau, k[0], w8)
+        for i in range(N_X):
+            xs[i] = x[i] + 0.5 * dt * k[0, i]
+        _rhs12(p, inv_T, xs, f, tau, k[1], w8)
+        for i in range(N_X):
+            xs[i] = x[i] + 0.5 * dt * k[1, i]
+        _rhs12(p, inv_T, xs, f, tau, k[2], w8)
+        for i in range(N_X):
+            xs[i] = x[i] + dt * k[2, i]
+        _rhs12(p, inv_T, xs, f, tau, k[3], w8)
+        for i in range(N_X):
+            x[i] += dt / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+
+
+@njit(cache=True)
+def jacobian12(p, inv_T, x, tau, A, A8, f):
+    """A = df/dx (12 x 12) of the 12-state model at x with the input tau."""
+    for i in range(4):
+        f[i] = tau[i] + x[8 + i]
+    kin.jacobian_into(p, x[:8], f, A8)
+    for i in range(N_X):
+        for j in range(N_X):
+            A[i, j] = 0.0
+    for i in range(8):
+        for j in range(8):
+            A[i, j] = A8[i, j]
+    # the bias enters like the force: d nu_dot / d b = M^-1 (heave with the submerged added mass)
+    m_w = p[kin.P_M] - kin.submerged(p, x[2]) * p[kin.P_ZWDOT]
+    for i in (0, 1, 3):
+        for j in (0, 1, 3):
+            A[4 + i, 8 + j] = p[kin.P_MINV + 4 * i + j]
+    A[6, 10] = 1.0 / m_w
+    for i in range(4):
+        A[8 + i, 8 + i] = -inv_T[i]
+
+
+@njit(cache=True)
+def van_loan(A, W, h, F):
+    """(Phi, Q) of x_dot = A x + E w, E W E^T with E = [0; M^-1 (force noise); I (bias drivers)]
+    read from A's bias columns (the force noise enters like the bias). F (24 x 24) is work."""
+    n = N_X
+    for i in range(2 * n):
+        for j in range(2 * n):
+            F[i, j] = 0.0
+    for i in range(n):
+        for j in range(n):
+            F[i, j] = -A[i, j] * h
+            F[n + i, n + j] = A[j, i] * h
+    # E W E^T: force noise through the bias columns of A (rows 4..7), bias drivers on rows 8..11
+    for i in range(4, 8):
+        for j in range(4, 8):
+            acc = 0.0
+            for d in range(4):
+                acc += A[i, 8 + d] * W[d] * A[j, 8 + d]
+            F[i, n + j] = acc * h
+    for d in range(4):
+        F[8 + d, n + 8 + d] = W[4 + d] * h
+    G = expm_pade(F)
+    Phi = np.ascontiguousarray(G[n:, n:].T)
+    Q = Phi @ np.ascontiguousarray(G[:n, n:])
+    for i in range(n):  # symmetric by construction; remove the round-off
+        for j in range(i + 1, n):
+            q = 0.5 * (Q[i, j] + Q[j, i])
+            Q[i, j] = q
+            Q[j, i] = q
+    return Phi, Q
+
+
+@njit(cache=True)
+def ekf_predict(p, inv_T, W, h, n_sub, x, P, tau, A, A8, F, k, xs, f):
+    """Project (x, P) over one sample with the wrench tau (4) held (in place). A non-finite tau
+    entry is taken as 0 (as the linear filter does)."""
+    u = np.empty(4)
+    for i in range(4):
+        u[i] = tau[i] if math.isfinite(tau[i]) else 0.0
+    jacobian12(p, inv_T, x, u, A, A8, f)
+    Phi, Q = van_loan(A, W, h, F)
+    propagate_state(p, inv_T, x, u, h, n_sub, k, xs, f)
+    x[_PSI] = wrap_angle(x[_PSI])
+    PP = Phi @ P @ Phi.T + Q
+    for i in range(N_X):
+        for j in range(N_X):
+            P[i, j] = 0.5 * (PP[i, j] + PP[j, i])
+
+
+@njit(cache=True, inline="always")
+def _correct(est, t, y, present, rep):
+    correct_arrays(est.x, est.P, est.ch, est.H, est.cfg, est.wrap, t, y, present, rep, est.work)
+
+
+@njit(cache=True, inline="always")
+def _predict(est, t, tau):
+    ekf_predict(est.p, est.inv_T, est.W, est.h, est.n_sub, est.x, est.P, tau, est.A, est.A8, est.F, est.k,
+                est.xs, est.f)
+
+
+register_estimator(EKF, state=("x", "P", "ch"), correct=_correct, predict=_predict)
+
+
+# --------------------------------------------------------------------------------------------
+# Design (plain Python)
+# --------------------------------------------------------------------------------------------
+
+def continuous_model(p: np.ndarray, inv_T: np.ndarray, x: np.ndarray, tau: np.ndarray | None = None) -> np.ndarray:
+    """The 12 x 12 Jacobian at x (for design and tests)."""
+    A = np.empty((N_X, N_X))
+    jacobian12(p, inv_T, np.asarray(x, dtype=float), np.zeros(4) if tau is None else np.asarray(tau, dtype=float),
+               A, np.empty((8, 8)), np.empty(4))
+    return A
+
+
+def discrete_model(p: np.ndarray, inv_T: np.ndarray, W: np.ndarray, x: np.ndarray, h: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(Phi, Q) at x, by scipy's expm (the design-time check of the compiled Van Loan)."""
+    A = continuous_model(p, inv_T, x)
+    n = N_X
+    EWE = np.zeros((n, n))
+    Bf = A[:, 8:12]
+    EWE[4:8, 4:8] = (Bf[4:8] * W[:4]) @ Bf[4:8].T
+    EWE[8:, 8:] = np.diag(W[4:])
+    F = np.block([[-A * h, EWE * h], [np.zeros((n, n)), A.T * h]])
+    G = expm(F)
+    Phi = G[n:, n:].T
+    return Phi, Phi @ G[:n, n:]
+
+
+def packed_model(vehicle: Vehicle, config: DesignConfig) -> np.ndarray:
+    """The EKF's packed model: the vehicle file's, with the configuration's known current, and
+    without the restoring force: like the depth-and-heading filter (Sandøy 2016, sec. 5.1) the heave
+    bias b_Z carries the net weight (which the thesis found a few hundred grams off and varying from
+    run to run), so b_Z estimates what rovlab.core.components.TRUTH calls b_Z and the controller's
+    bias feed-forward cancels the net weight too."""
+    p = kin.pack(vehicle)
+    p[kin.P_VC:kin.P_VC + 3] = config.ekf.current
+    p[kin.P_BUOY] = 0.0
+    p[kin.P_WEIGHT] = 0.0
+    p[kin.P_GZ] = 0.0
+    return p
+
+
+def build(vehicle: Vehicle, config: DesignConfig) -> EstimatorSpec:
+    """Design the 4-DOF EKF of a configuration (raises ConfigError naming the file and key)."""
+    file = config.file or config.name
+    ec = config.ekf
+    channels, problems = make_channels(vehicle, config, STATE_OF_QUANTITY, estimator="ekf")
+    if problems:
+        raise ConfigError(problems, "filter configuration")
+    bad_dr = [s for s in ec.dead_reckoning if s not in EKF_STATES]
+    if bad_dr:
+        raise ConfigError([Problem(file, "ekf.dead_reckoning", bad_dr, "states of the EKF: " + ", ".join(EKF_STATES))],
+                          "filter configuration")
+    h = config.sample_time
+    p = packed_model(vehicle, config)
+    inv_T = 1.0 / np.asarray(ec.bias_time_constant_s, dtype=float)
+    W = np.concatenate([ec.force_psd, ec.bias_psd]).astype(float)
+    m = len(channels)
+    H = np.zeros((m, N_X))
+    for j, c in enumerate(channels):
+        H[j, c.state_index] = 1.0
+    R = np.diag([c.variance for c in channels]) if m else np.zeros((0, 0))
+    x0 = np.array(ec.initial_state, dtype=float)
+    if x0[2] < 1.0:  # linearise fully submerged (the free surface only changes heave's mass)
+        x0[2] = 1.0
+    A = continuous_model(p, inv_T, x0)
+    observable, touched, V = observability(A, H, EKF_STATES)
+    accepted = set(ec.dead_reckoning)
+    if not observable and not set(touched) <= accepted:
+        problem = unobservable_problem(file, channels, touched, V, EKF_STATES)
+        extra = [s for s in touched if s not in accepted]
+        raise ConfigError([Problem(problem.file, problem.key, problem.value,
+                                   problem.expected.replace("Add a measurement", "Add a measurement (a position fix: "
+                                                            "motion capture x, y; velocity: a DVL)", 1)
+                                   + f" Or accept dead reckoning of {', '.join(extra)} with "
+                                   "[ekf] dead_reckoning = [...].")], "filter configuration")
+    Phi, Q = discrete_model(p, inv_T, W, x0, h)
+    P0 = np.diag(np.asarray(ec.initial_std, dtype=float) ** 2)
+    keep = [i for i, s in enumerate(EKF_STATES) if s not in accepted]
+    auto = startup_time(Phi[np.ix_(keep, keep)], Q[np.ix_(keep, keep)], H[:, keep], R, P0[np.ix_(keep, keep)], h,
+                        max_steps=20_000) if m else 0.0
+    late = [(c, mc) for c, mc in zip(channels, config.measurements)
+            if not math.isnan(c.startup_s) and c.startup_s < auto and np.isfinite(c.gate_threshold)]
+    if late:
+        raise ConfigError([Problem(file, f"fusion.startup_s ({mc.key})", c.startup_s,
+                                   f"at least {auto:.3g} s for {c.name}: the start-up this EKF design needs before "
+                                   "its innovation gate is valid; leave it out to use that value") for c, mc in late],
+                          "filter configuration")
+    channels = [replace(c, startup_s=auto) if math.isnan(c.startup_s) else c for c in channels]
+    cfg = channel_config(channels, H)
+    kernel = EKF(p, inv_T, W, float(h), int(ec.substeps), H, cfg, np.array([s == "psi" for s in EKF_STATES]),
+                 np.array(ec.initial_state, dtype=float), P0.copy(), new_channel_state(m), np.empty(work_size(N_X, m)),
+                 np.empty((N_X, N_X)), np.empty((8, 8)), np.empty((2 * N_X, 2 * N_X)), np.empty((4, N_X)),
+                 np.empty(N_X), np.empty(4))
+    model = EKFModel(h=h, p=p, inv_T=inv_T, W=W, channels=tuple(channels), H=H, R=R, x0=kernel.x.copy(), P0=P0,
+                     Phi0=Phi, Q0=Q, observable=observable, dead_reckoned=tuple(s for s in touched))
+    return EstimatorSpec(kernel=kernel, states=EKF_STATES, nav=EKF_STATES, channels=tuple(channels), h=h, model=model)
+
+
+class EKFModel(NamedTuple):
+    """The design behind an EKF (for display and tests): model, noise and its linearisation at x0."""
+
+    h: float
+    p: np.ndarray
+    inv_T: np.ndarray
+    W: np.ndarray
+    channels: tuple
+    H: np.ndarray
+    R: np.ndarray
+    x0: np.ndarray
+    P0: np.ndarray
+    Phi0: np.ndarray
+    Q0: np.ndarray
+    observable: bool
+    dead_reckoned: tuple[str, ...]
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        return EKF_STATES
