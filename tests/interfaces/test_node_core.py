@@ -182,3 +182,52 @@ def test_messages_are_the_simulators_topics(core):
     est = out.messages()[0][2]
     assert set(est["state"]) == set(core.states) and set(est["sensors"]) == {c.column for c in core.channels}
     assert set(out.messages()[3][2]["pwm_us"]) == set(core.thrusters)
+
+
+def _rms(a):
+    return float(np.sqrt(np.mean(np.square(a))))
+
+
+def _wrap(a):
+    return np.remainder(np.asarray(a) + np.pi, 2 * np.pi) - np.pi
+
+
+def test_node_closing_the_loop_on_a_simulated_vehicle_tracks_like_the_simulator():
+    """Case study 2 (Sandøy 2016, sec. 5.3.1; scenario step-process-model): the node stepping a
+    SimulatedVehicle (PWM in, samples out, as over a middleware) holds depth and heading as the
+    compiled closed loop does: the same plant, sensors and components, split in two halves."""
+    from rovlab.sim.realtime import SimulatedVehicle
+    from rovlab.sim.runner import simulate
+
+    sim = SimulatedVehicle("step-process-model")
+    core = NodeCore(sim.prep.vehicle, sim.prep.config, pwm_resolution_us=sim.scenario.pwm_resolution_us,
+                    log=lambda msg: None)
+    n = int(round(sim.scenario.duration_s / sim.h)) + 1
+    err = np.empty((n, 2))
+    for k in range(n):
+        s = sim.step()
+        core.set_reference(z=s.reference[0], psi=s.reference[1])
+        for sensor, quantity, value in s.samples:
+            core.push(sensor, quantity, value, s.t)
+        outs = core.tick(s.t + core.collect_s)
+        assert [o.k for o in outs] == [k]
+        sim.set_pwm(outs[-1].pwm_us)
+        err[k] = s.truth["z"] - s.reference[0], _wrap(s.truth["psi"] - s.reference[1])
+    c = simulate("step-process-model").columns
+    batch = np.column_stack([c["true_z"] - c["ref_z"], _wrap(c["true_psi"] - c["ref_psi"])])
+    for i in range(2):
+        assert _rms(err[:, i]) == pytest.approx(_rms(batch[:, i]), rel=0.05)
+        assert _rms(err[-100:, i]) < 2 * _rms(batch[-100:, i]) + 1e-3
+
+
+def test_simulated_vehicle_refuses_bad_pwm():
+    from rovlab.sim.realtime import SimulatedVehicle
+
+    sim = SimulatedVehicle("step-process-model")
+    with pytest.raises(ValueError, match="6 thrusters"):
+        sim.set_pwm([1500.0] * 3)
+    with pytest.raises(ValueError, match="finite"):
+        sim.set_pwm([1500.0] * 5 + [float("nan")])
+    assert np.array_equal(sim.pwm, sim.neutral_pwm)
+    s = sim.step()
+    assert s.k == 0 and {q for _, q, _ in s.samples} == {"z", "psi"}
