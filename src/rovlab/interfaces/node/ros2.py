@@ -14,6 +14,7 @@ carries on: nothing from the outside stops the node.
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import time
@@ -28,7 +29,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, Imu
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
 from rovlab.interfaces.node import ros_common as rc
 from rovlab.interfaces.node.core import NodeCore, NodeOutput
@@ -90,6 +91,7 @@ class VehicleNode:
         self.pub_wrench = node.create_publisher(WrenchStamped, rc.TOPICS["wrench"], RELIABLE)
         self.pub_pwm = node.create_publisher(Float64MultiArray, rc.TOPICS["pwm"], RELIABLE)
         self.pub_diag = node.create_publisher(DiagnosticArray, rc.TOPICS["diagnostics"], RELIABLE)
+        self.pub_msgs = node.create_publisher(String, rc.TOPICS["messages"], RELIABLE)
         self._declare_parameters()
         node.add_on_set_parameters_callback(self._on_set_parameters)
         node.create_timer(core.h / 5.0, self._guard("timer", self._on_timer))
@@ -159,6 +161,8 @@ class VehicleNode:
                                                            gains=getattr(self.core.design.controller.model, "K", None)))
             _stamp(d.header.stamp, out.stamp)
             self.pub_diag.publish(d)
+        if self.pub_msgs.get_subscription_count() > 0:  # the HMI (rovlab hmi --source ros2) listens
+            self.pub_msgs.publish(String(data=json.dumps(out.messages())))
         if self.recorder is not None:
             self.recorder.output(out)
 
@@ -257,8 +261,8 @@ class SimNode:
         node.create_subscription(Float64MultiArray, rc.TOPICS["pwm"], self._on_pwm, RELIABLE)
         self.last_ref: tuple[float, float] | None = None
         self.last_ref_time = -1e9
-        self.start = time.monotonic()
-        node.create_timer(sim.h, self._on_timer)
+        self.t0: float | None = None
+        node.create_timer(sim.h / 2.0, self._on_timer)
 
     def _on_pwm(self, msg: Any) -> None:
         try:
@@ -273,8 +277,19 @@ class SimNode:
                 return
             self.waiting = False
             self.node.get_logger().info("a node is listening and commanding: the simulated vehicle starts")
-        s = self.sim.step()
         now = self.node.get_clock().now().nanoseconds * 1e-9
+        if self.t0 is None:
+            self.t0 = now
+        # the simulated time follows the clock: steps missed while the process was held up are
+        # made up at once (stamped with their own times), at most 50 at a time
+        due = int((now - self.t0) / self.sim.h + 1e-9) + 1 - self.sim.k
+        for _ in range(min(max(due, 0), 50)):
+            s = self.sim.step()
+            self._publish_step(s, self.t0 + s.t)
+        if due > 50:
+            self.t0 = now - (self.sim.k - 1) * self.sim.h
+
+    def _publish_step(self, s: Any, now: float) -> None:
         by_sensor: dict[str, dict[str, float]] = {}
         for sensor, quantity, value in s.samples:
             by_sensor.setdefault(sensor, {})[quantity] = value
