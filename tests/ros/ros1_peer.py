@@ -82,11 +82,11 @@ def peer(ns: str, logdir: str) -> dict:
     out: dict = {}
     subprocess.run([sys.executable, "-c", WARM], check=True, timeout=1200, capture_output=True)
     m = master(logdir)
-    proc = start([ROVLAB, "ros1", "node", "--vehicle", "udrone", "--config", "thesis", "--namespace", ns],
-                 os.path.join(logdir, "node.log"))
+    proc = start([ROVLAB, "ros1", "node", "--vehicle", "udrone", "--config", "thesis", "--namespace", ns,
+                  "--remap", f"pressure:=/{ns}/depth/pressure"], os.path.join(logdir, "node.log"))
     try:
         rospy.init_node("rovlab_test_peer", disable_signals=True)
-        pub_p = rospy.Publisher(f"/{ns}/pressure", FluidPressure, queue_size=10)
+        pub_p = rospy.Publisher(f"/{ns}/depth/pressure", FluidPressure, queue_size=10)  # remapped
         pub_m = rospy.Publisher(f"/{ns}/mocap/pose", PoseStamped, queue_size=10)
         pub_s = rospy.Publisher(f"/{ns}/setpoint", PoseStamped, queue_size=10, latch=True)
         got: dict[str, list] = {"odom": [], "pwm": [], "wrench": [], "diag": []}

@@ -99,11 +99,12 @@ def peer(ns: str, logdir: str) -> dict:
     out: dict = {}
     warm_up()
     proc = start(["ros2", "node", "--vehicle", "udrone", "--config", "thesis", "--namespace", ns,
-                  "--record", os.path.join(logdir, "node.mcap")], os.path.join(logdir, "node.log"))
+                  "--record", os.path.join(logdir, "node.mcap"), "--remap", f"pressure:=/{ns}/depth/pressure"],
+                 os.path.join(logdir, "node.log"))
     rclpy.init()
     node = rclpy.create_node("rovlab_test_peer")
     try:
-        pub_p = node.create_publisher(FluidPressure, f"/{ns}/pressure", qos_profile_sensor_data)
+        pub_p = node.create_publisher(FluidPressure, f"/{ns}/depth/pressure", qos_profile_sensor_data)  # remapped
         pub_m = node.create_publisher(PoseStamped, f"/{ns}/mocap/pose", qos_profile_sensor_data)
         pub_s = node.create_publisher(PoseStamped, f"/{ns}/setpoint", RELIABLE)
         got: dict[str, list] = {"odom": [], "pwm": [], "wrench": [], "diag": []}
@@ -258,10 +259,6 @@ def main() -> None:
     print("RESULT " + json.dumps(res))
 
 
-if __name__ == "__main__":
-    main()
-
-
 def hmi(ns: str, logdir: str) -> dict:
     """The HMI's ROS 2 source against a running node: messages in, commands and tuning out."""
     from rovlab.interfaces.node.ros2_source import Ros2Source, hmi_documents
@@ -339,3 +336,7 @@ def hmi(ns: str, logdir: str) -> dict:
         rclpy.try_shutdown()
         out["node_exit"] = stop(proc)
     return out
+
+
+if __name__ == "__main__":
+    main()

@@ -14,6 +14,7 @@ rospy runs each subscription and timer in its own thread; NodeCore is thread-saf
 from __future__ import annotations
 
 import math
+import os
 import signal
 import threading
 import time
@@ -177,8 +178,10 @@ class VehicleNode1:
         rospy.loginfo(f"parameters set: {', '.join(changes) or 'surface_pressure_pa'}")
 
 
-def _init(name: str, namespace: str) -> None:
-    argv = ["rovlab"] + ([f"__ns:=/{namespace.strip('/')}"] if namespace.strip("/") else [])
+def _init(name: str, namespace: str, remaps: list[str] | None = None) -> None:
+    if namespace.strip("/"):  # rospy takes the namespace from the environment (as roslaunch sets it)
+        os.environ["ROS_NAMESPACE"] = "/" + namespace.strip("/")
+    argv = ["rovlab", *(remaps or [])]
     rospy.init_node(name, argv=argv, disable_signals=True)
 
 
@@ -197,7 +200,7 @@ def _spin(on_exit: Callable[[], None] | None = None) -> int:
 
 
 def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance: bool = False,
-             record: str | None = None) -> int:
+             record: str | None = None, remaps: list[str] | None = None) -> int:
     """``rovlab ros1 node``."""
     from rovlab.interfaces.node.runtime import load_node
 
@@ -207,7 +210,7 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
         from rovlab.interfaces.node.record import NodeRecorder
 
         recorder = NodeRecorder(record, core, namespace=namespace)
-    _init("rovlab_node", namespace)
+    _init("rovlab_node", namespace, remaps)
     VehicleNode1(core, table, mocap_covariance=mocap_covariance, recorder=recorder)
     rospy.loginfo(f"rovlab node up (ROS 1): vehicle {core.vehicle.name}, configuration {core.config.name}, "
                   f"h = {core.h:g} s; fusing " + ", ".join(c.name for c in core.channels))
@@ -315,12 +318,12 @@ class SimNode1:
 
 
 def run_sim(*, vehicle: str | None, scenario: str, namespace: str = "", setpoints: bool = True,
-            duration_s: float | None = None, wait: bool = True) -> int:
+            duration_s: float | None = None, wait: bool = True, remaps: list[str] | None = None) -> int:
     """``rovlab ros1 sim``."""
     from rovlab.interfaces.node.runtime import load_sim
 
     sim = load_sim(scenario, vehicle)
-    _init("rovlab_sim", namespace)
+    _init("rovlab_sim", namespace, remaps)
     SimNode1(sim, setpoints=setpoints, wait=wait)
     rospy.loginfo(f"rovlab sim up (ROS 1): scenario {sim.scenario.name}, h = {sim.h:g} s")
     if duration_s is not None:

@@ -223,8 +223,17 @@ def _spin(node: Node, on_exit: Callable[[], None] | None = None) -> int:
     return 0
 
 
+def _ros_args(remaps: list[str] | None) -> list[str]:
+    out = ["rovlab"]
+    if remaps:
+        out.append("--ros-args")
+        for r in remaps:
+            out += ["-r", r]
+    return out
+
+
 def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance: bool = False,
-             record: str | None = None, ros_args: list[str] | None = None) -> int:
+             record: str | None = None, remaps: list[str] | None = None) -> int:
     """``rovlab ros2 node``."""
     from rovlab.interfaces.node.runtime import load_node
 
@@ -234,7 +243,7 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
         from rovlab.interfaces.node.record import NodeRecorder
 
         recorder = NodeRecorder(record, core)
-    rclpy.init(args=["rovlab", *(ros_args or [])], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(args=_ros_args(remaps), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     vn = VehicleNode(core, table, namespace=namespace, mocap_covariance=mocap_covariance, recorder=recorder)
     vn.info(f"rovlab node up: vehicle {core.vehicle.name}, configuration {core.config.name}, h = {core.h:g} s, "
             f"estimator {core.estimator_name}, controller {core.controller_name}; fusing "
@@ -339,12 +348,12 @@ class SimNode:
 
 
 def run_sim(*, vehicle: str | None, scenario: str, namespace: str = "", setpoints: bool = True,
-            duration_s: float | None = None, wait: bool = True, ros_args: list[str] | None = None) -> int:
+            duration_s: float | None = None, wait: bool = True, remaps: list[str] | None = None) -> int:
     """``rovlab ros2 sim``."""
     from rovlab.interfaces.node.runtime import load_sim
 
     sim = load_sim(scenario, vehicle)
-    rclpy.init(args=["rovlab", *(ros_args or [])], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(args=_ros_args(remaps), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     sn = SimNode(sim, namespace=namespace, setpoints=setpoints, wait=wait)
     sn.node.get_logger().info(f"rovlab sim up: scenario {sim.scenario.name}, vehicle {sim.prep.truth.name}, "
                               f"h = {sim.h:g} s; publishing " + ", ".join(c.name for c in sim.channels))
