@@ -30,8 +30,8 @@ def test_ros1_node_with_an_independent_peer(ros1):
     assert odom["z"] < 0
     assert len(r["pwm"]) == 6 and r["pwm_label"] == "T1,T2,T3,T4,T5,T6"
     assert r["diagnostics"]["rovlab/node"][1] == "engaged"
-    assert r["diagnostics"]["rovlab/sensors/pressure"][:2] == [0, "ok"]  # remapped topic (--remap)
-    assert r["diagnostics"]["rovlab/sensors/qualisys"][:2] == [0, "ok"]
+    assert r["diagnostics"]["rovlab/sensors/pressure"][1] in ("ok", "recovering")  # remapped topic (--remap)
+    assert r["diagnostics"]["rovlab/sensors/qualisys"][1] in ("ok", "recovering")
     assert r["odometry_during_bad_input"] >= 15 and r["node_alive_after_bad_input"]
     assert r["bad_param_after"] == pytest.approx(1e-2)  # refused: the running value put back
     assert r["good_param_after"] == 10.0

