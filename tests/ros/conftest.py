@@ -59,7 +59,9 @@ def run_isolated(argv: list[str], *, timeout: float, tmp: Path) -> dict:
             pass
     for line in out.splitlines():
         if line.startswith("RESULT "):
-            return json.loads(line[len("RESULT "):])
+            result = json.loads(line[len("RESULT "):])
+            result["logs"] = {p.name: p.read_text()[:4000] for p in sorted(tmp.glob("*.log"))}
+            return result
     logs = "".join(f"\n--- {p.name}\n{p.read_text()[-3000:]}" for p in sorted(tmp.glob("*.log")))
     raise AssertionError(f"no result from {argv[1:]} (exit {proc.returncode}):\n{out[-5000:]}{logs}")
 

@@ -48,5 +48,7 @@ def test_ros1_sim_and_node_hold_depth_and_heading_like_the_case_study(ros1):
     print(f"\nROS 1 sim+node, 60 s: depth RMS {m['z']:.4f} m (simulator {m['z_sim']:.4f}), heading RMS "
           f"{m['psi']:.4f} rad (simulator {m['psi_sim']:.4f}); last 10 s {m['z_last10']:.4f} m, {m['psi_last10']:.4f} rad")
     assert m["rows"] >= 0.95 * duration / 0.1
-    assert m["z"] == pytest.approx(m["z_sim"], rel=0.25) and m["psi"] == pytest.approx(m["psi_sim"], rel=0.25)
+    logs = "\n".join(f"--- {k}\n{v}" for k, v in r["logs"].items())
+    assert m["z"] == pytest.approx(m["z_sim"], rel=0.25), logs
+    assert m["psi"] == pytest.approx(m["psi_sim"], rel=0.25), logs
     assert m["z_last10"] < 0.02 and m["psi_last10"] < max(2 * m["psi_sim_last10"], 0.02)

@@ -123,7 +123,10 @@ class VehicleNode1:
         s = rc.pose_samples(msg.pose, "setpoint.pose")
         if s["z"] < 0.0:
             raise rc.MessageError(f"setpoint depth {s['z']:g} m (ENU z = {-s['z']:g}) is above the surface")
+        engaged = self.core.engaged
         self.core.set_reference(z=s["z"], psi=s["psi"])
+        if not engaged:
+            rospy.loginfo(f"first set-point: depth {s['z']:g} m, heading {s['psi']:g} rad; controller engaged")
 
     def _run(self, now: float) -> None:
         outs = self.core.tick(now)
@@ -239,6 +242,7 @@ class SimNode1:
         self.last_ref_time = -1e9
         self.lock = threading.Lock()
         self.t0: float | None = None
+        self.ready_at: float | None = None
         rospy.Timer(rospy.Duration(sim.h / 2.0), self._on_timer)
 
     def _on_pwm(self, msg: Any) -> None:
@@ -255,13 +259,18 @@ class SimNode1:
                 self.warn("sim", f"simulated vehicle: {type(exc).__name__}: {exc}")
 
     def _tick(self) -> None:
+        now = _now()
         if self.waiting:
             if self.pub_p.get_num_connections() + self.pub_m.get_num_connections() == 0 \
-                    or self.sub.get_num_connections() == 0:
+                    or self.sub.get_num_connections() == 0 \
+                    or (self.pub_s is not None and self.pub_s.get_num_connections() == 0):
+                return
+            if self.ready_at is None:
+                self.ready_at = now
+            if now - self.ready_at < 1.0:
                 return
             self.waiting = False
             rospy.loginfo("a node is listening and commanding: the simulated vehicle starts")
-        now = _now()
         if self.t0 is None:
             self.t0 = now
         due = int((now - self.t0) / self.sim.h + 1e-9) + 1 - self.sim.k  # made up when held up (see ros2.py)

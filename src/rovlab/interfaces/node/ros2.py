@@ -137,7 +137,10 @@ class VehicleNode:
         s = rc.pose_samples(msg.pose, "setpoint.pose")
         if s["z"] < 0.0:
             raise rc.MessageError(f"setpoint depth {s['z']:g} m (ENU z = {-s['z']:g}) is above the surface")
+        engaged = self.core.engaged
         self.core.set_reference(z=s["z"], psi=s["psi"])
+        if not engaged:
+            self.info(f"first set-point: depth {s['z']:g} m, heading {s['psi']:g} rad; controller engaged")
 
     def _on_timer(self) -> None:
         self._run(self.now())
@@ -271,6 +274,7 @@ class SimNode:
         self.last_ref: tuple[float, float] | None = None
         self.last_ref_time = -1e9
         self.t0: float | None = None
+        self.ready_at: float | None = None
         node.create_timer(sim.h / 2.0, self._on_timer)
 
     def _on_pwm(self, msg: Any) -> None:
@@ -280,13 +284,19 @@ class SimNode:
             self.warn("pwm", f"thrusters/pwm_us ignored: {exc}")
 
     def _on_timer(self) -> None:
+        now = self.node.get_clock().now().nanoseconds * 1e-9
         if self.waiting:  # hold the vehicle at its initial state until a node listens and commands
-            if self.node.count_subscribers(rc.TOPICS["pressure"]) + self.node.count_subscribers(rc.TOPICS["mocap"]) == 0 \
-                    or self.node.count_publishers(rc.TOPICS["pwm"]) == 0:
+            n = self.node
+            if n.count_subscribers(rc.TOPICS["pressure"]) + n.count_subscribers(rc.TOPICS["mocap"]) == 0 \
+                    or n.count_publishers(rc.TOPICS["pwm"]) == 0 \
+                    or (self.pub_s is not None and n.count_subscribers(rc.TOPICS["setpoint"]) == 0):
+                return
+            if self.ready_at is None:  # discovered: give the connections a moment to match
+                self.ready_at = now
+            if now - self.ready_at < 1.0:
                 return
             self.waiting = False
-            self.node.get_logger().info("a node is listening and commanding: the simulated vehicle starts")
-        now = self.node.get_clock().now().nanoseconds * 1e-9
+            n.get_logger().info("a node is listening and commanding: the simulated vehicle starts")
         if self.t0 is None:
             self.t0 = now
         # the simulated time follows the clock: steps missed while the process was held up are
