@@ -231,3 +231,17 @@ def test_simulated_vehicle_refuses_bad_pwm():
     assert np.array_equal(sim.pwm, sim.neutral_pwm)
     s = sim.step()
     assert s.k == 0 and {q for _, q, _ in s.samples} == {"z", "psi"}
+
+
+def test_the_clock_can_wait_for_the_first_sample(udrone):
+    """A node started before its sensors (wait_for_samples_s) runs no steps until the first sample
+    or the wait is over, so its sensors are not timed out before they ever spoke."""
+    core = NodeCore(*udrone, log=lambda msg: None, wait_for_samples_s=5.0)
+    assert core.tick(0.0) == [] and core.tick(3.0) == []
+    _sample_all(core, 0)  # stamps at 0: the first sample starts the clock
+    outs = core.tick(0.0)
+    assert [o.k for o in outs] == [0] and all(s == "ok" for s in outs[0].channel_status)
+    late = NodeCore(*udrone, log=lambda msg: None, wait_for_samples_s=5.0)
+    late.tick(100.0)
+    assert late.tick(104.9) == [] and late.tick(105.0) == []  # no sensor: the clock starts after 5 s ...
+    assert [o.k for o in late.tick(105.0 + late.collect_s)] == [0]  # ... and runs from there

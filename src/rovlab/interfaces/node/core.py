@@ -23,7 +23,9 @@ Units and frames are rovlab's (SI, radians, NED world, FRD body): adapters conve
 **Clock.** Times (``stamp``, ``now``) are seconds on the adapter's clock (ROS time, Unix time,
 a test's counter). Step k is due at T_k = t0 + k h; t0 is the stamp of the first sample pushed
 (or ``now`` of the first :meth:`tick` if none came), so the steps line up with a sensor that
-samples at the control rate. The filter sees the time k h.
+samples at the control rate. The filter sees the time k h. With ``wait_for_samples_s`` > 0
+(the ROS nodes use 10 s) ticks before the first sample run nothing for that long, so a node started
+before its sensors does not dead-reckon (and time its sensors out) before they ever spoke.
 
 **Samples.** A sample belongs to the step nearest its stamp. Per channel, the newest sample for
 a step at or before the current one is used; what else can happen is returned by :meth:`push`
@@ -151,7 +153,7 @@ class NodeCore:
     def __init__(self, vehicle: Vehicle, config: DesignConfig, *, estimator: str | None = None,
                  controller: str | None = None, pwm_resolution_us: float = 1.0, collect_s: float | None = None,
                  max_lag: int = 1, max_ahead_s: float = 1.0, max_catch_up: int = 600,
-                 log: Callable[[str], None] | None = None) -> None:
+                 log: Callable[[str], None] | None = None, wait_for_samples_s: float = 0.0) -> None:
         self._lock = threading.RLock()
         self._log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
         self._names = (estimator, controller)
@@ -168,6 +170,8 @@ class NodeCore:
         self.engaged = False
         self.k = 0
         self.t0: float | None = None
+        self.wait_for_samples_s = float(wait_for_samples_s)
+        self._first_tick: float | None = None
         self._install(make_design(vehicle, config, plant="process", plant_step=config.sample_time,
                                   estimator=estimator, controller=controller), keep=None)
 
@@ -331,6 +335,10 @@ class NodeCore:
         """Run the steps due at adapter time ``now`` (none, one, or a few after a stall)."""
         with self._lock:
             if self.t0 is None:
+                if self._first_tick is None:
+                    self._first_tick = float(now)
+                if now - self._first_tick < self.wait_for_samples_s:
+                    return []  # no sample yet: the clock starts with the first one (see the module)
                 self.t0 = float(now)
             out: list[NodeOutput] = []
             # steps whose deadline T_j + collect_s has passed: j <= (now - collect_s - t0) / h

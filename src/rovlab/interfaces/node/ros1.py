@@ -210,7 +210,7 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
     """``rovlab ros1 node``."""
     from rovlab.interfaces.node.runtime import load_node
 
-    core, table = load_node(vehicle, config)
+    core, table = load_node(vehicle, config, wait_for_samples_s=10.0)
     recorder = None
     if record:
         from rovlab.interfaces.node.record import NodeRecorder
