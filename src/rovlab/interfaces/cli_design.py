@@ -29,7 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     fil = sub.add_parser("filter", help="estimate depth, heading, velocities and biases from a recorded log")
     fil.add_argument("log", help="CSV log: time_s, tau_Z, tau_N and one column per fused sensor channel "
-                                 "(e.g. z_qualisys, z_pressure, psi_qualisys); empty or nan = no sample")
+                                 "(e.g. z_qualisys, z_pressure, psi_qualisys); empty or nan = no sample; or an MCAP "
+                                 "log with rovlab's topics (a simulation's timeseries.mcap, a `rovlab ros2 node "
+                                 "--record` recording)")
     fil.add_argument("--out", required=True, help="output CSV (- for standard output)")
     fil.add_argument("--max-gap-steps", type=int, default=10_000, metavar="N",
                      help="a gap of more than N filter samples restarts the filter from its prior instead of "
@@ -152,6 +154,28 @@ def _check_initial(config, model) -> None:
         raise ConfigError(problems, "configuration")
 
 
+def _mcap_as_csv(path: str) -> str:
+    """The time_s, meas_*, tau_* ... columns of an MCAP log, as a temporary CSV removed at exit."""
+    import atexit
+    import os
+    import tempfile
+
+    from rovlab.io.logs import write_csv
+    from rovlab.io.timeseries import read_mcap_columns
+
+    cols = read_mcap_columns(path)
+    fd, tmp = tempfile.mkstemp(prefix="rovlab-replay-", suffix=".csv")
+    os.close(fd)
+
+    def _remove() -> None:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+    atexit.register(_remove)
+    write_csv(tmp, cols)
+    return tmp
+
+
 def _cmd_filter(args: argparse.Namespace) -> int:
     from rovlab.estimation.fusion import (
         EVENT_NONFINITE,
@@ -174,9 +198,12 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     filt = DepthHeadingFilter(model)
     columns = [c.column for c in model.channels]
     # a simulation's timeseries.csv names the samples meas_<quantity>_<sensor>: read those as they are
-    header = set(LogStream(args.log, required=("time_s",)).header)
+    log_path = args.log
+    if str(args.log).lower().endswith(".mcap"):  # a recording: its rovlab topics as a CSV log
+        log_path = _mcap_as_csv(args.log)
+    header = set(LogStream(log_path, required=("time_s",)).header)
     source = {c: f"meas_{c}" if c not in header and f"meas_{c}" in header else c for c in columns}
-    stream = LogStream(args.log, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
+    stream = LogStream(log_path, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
     runner = StreamingFilter(filt, max_gap_steps=args.max_gap_steps)
     m = len(columns)
     # status codes -> labels ('ok', 'lost-timeout', ...): code = 8 status + reason
