@@ -16,6 +16,7 @@ _COMMAND_MODULES = (
     "rovlab.interfaces.cli_design",
     "rovlab.interfaces.cli_hmi",
     "rovlab.interfaces.cli_compare",
+    "rovlab.interfaces.cli_mavlink",
 )
 
 
@@ -36,6 +37,7 @@ _COMMAND_MODULE = {
     "filter": "rovlab.interfaces.cli_design",
     "hmi": "rovlab.interfaces.cli_hmi",
     "compare": "rovlab.interfaces.cli_compare",
+    "mavlink": "rovlab.interfaces.cli_mavlink",
 }
 
 
