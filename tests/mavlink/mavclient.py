@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import socket
+import struct
 import subprocess
 import sys
 import time
@@ -50,7 +51,16 @@ class GroundStation:
         self.latest: dict[str, Any] = {}
         self.seen: list[Any] = []  # every message since the last clear()
 
+        self._tlog: Any = None
+
+    def record_tlog(self, path: str) -> None:
+        """Write what arrives as a .tlog (8-byte big-endian UNIX time in us, then the raw message),
+        the format ground stations record (pymavlink's UDP reader does not log by itself)."""
+        self._tlog = open(path, "wb")  # noqa: SIM115 - closed in close()
+
     def close(self) -> None:
+        if self._tlog is not None:
+            self._tlog.close()
         self.conn.close()
 
     def pump(self, seconds: float = 0.0) -> None:
@@ -61,6 +71,8 @@ class GroundStation:
             if msg is not None and msg.get_type() != "BAD_DATA":
                 self.latest[msg.get_type()] = msg
                 self.seen.append(msg)
+                if self._tlog is not None:
+                    self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + msg.get_msgbuf())
             if msg is None and time.monotonic() >= end:
                 return
 

@@ -10,6 +10,8 @@ import argparse
 import json
 import math
 import sys
+import tempfile
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,7 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     fil = sub.add_parser("filter", help="estimate depth, heading, velocities and biases from a recorded log")
     fil.add_argument("log", help="CSV log: time_s, tau_Z, tau_N and one column per fused sensor channel "
-                                 "(e.g. z_qualisys, z_pressure, psi_qualisys); empty or nan = no sample")
+                                 "(e.g. z_qualisys, z_pressure, psi_qualisys); empty or nan = no sample. "
+                                 "Or a MAVLink dive: a .tlog, or an .mcap recorded by rovlab mavlink "
+                                 "(needs rovlab[mavlink]; docs/mavlink.md)")
     fil.add_argument("--out", required=True, help="output CSV (- for standard output)")
     fil.add_argument("--max-gap-steps", type=int, default=10_000, metavar="N",
                      help="a gap of more than N filter samples restarts the filter from its prior instead of "
@@ -153,6 +157,39 @@ def _check_initial(config, model) -> None:
 
 
 def _cmd_filter(args: argparse.Namespace) -> int:
+    from rovlab.interfaces.cli import UserError
+
+    if args.max_gap_steps < 1:
+        raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
+    vehicle, config, model = _load(args)
+    _check_initial(config, model)
+    with tempfile.TemporaryDirectory(prefix="rovlab-filter-") as tmp:
+        log = _mavlink_as_csv(args.log, vehicle, model, Path(tmp)) if _is_mavlink_log(args.log) else args.log
+        return _filter(args, vehicle, config, model, log)
+
+
+def _is_mavlink_log(path: str) -> bool:
+    return Path(path).suffix.lower() in (".tlog", ".mcap")
+
+
+def _mavlink_as_csv(log: str, vehicle, model, folder: Path) -> str:
+    """A MAVLink dive (.tlog, or .mcap recorded by rovlab mavlink) as the CSV the filter reads."""
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.mavlink import MavlinkMissing
+    from rovlab.interfaces.mavlink.logs import LogError, write_filter_log
+
+    out = folder / (Path(log).stem + ".csv")
+    try:
+        summary = write_filter_log(log, vehicle, model, out)
+    except (LogError, MavlinkMissing, RuntimeError) as exc:
+        raise UserError(str(exc)) from None
+    counts = ", ".join(f"{k} {v}" for k, v in summary["samples"].items())
+    print(f"rovlab filter: {log}: {summary['messages']} MAVLink messages -> {summary['rows']} rows ({counts})",
+          file=sys.stderr)
+    return str(out)
+
+
+def _filter(args: argparse.Namespace, vehicle, config, model, log: str) -> int:
     from rovlab.estimation.fusion import (
         EVENT_NONFINITE,
         EVENT_REJECTED,
@@ -167,16 +204,12 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     from rovlab.io.logs import ChunkWriter, LogStream
     from rovlab.io.tables import write_sidecar
 
-    if args.max_gap_steps < 1:
-        raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
-    vehicle, config, model = _load(args)
-    _check_initial(config, model)
     filt = DepthHeadingFilter(model)
     columns = [c.column for c in model.channels]
     # a simulation's timeseries.csv names the samples meas_<quantity>_<sensor>: read those as they are
-    header = set(LogStream(args.log, required=("time_s",)).header)
+    header = set(LogStream(log, required=("time_s",)).header)
     source = {c: f"meas_{c}" if c not in header and f"meas_{c}" in header else c for c in columns}
-    stream = LogStream(args.log, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
+    stream = LogStream(log, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
     runner = StreamingFilter(filt, max_gap_steps=args.max_gap_steps)
     m = len(columns)
     # status codes -> labels ('ok', 'lost-timeout', ...): code = 8 status + reason
