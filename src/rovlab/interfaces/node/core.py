@@ -1,0 +1,477 @@
+"""The vehicle node without middleware: samples in, estimate and thruster commands out.
+
+:class:`NodeCore` runs the configured estimator and controller (rovlab.sim.components: ``kf``,
+``lqg``, ``mrac`` ...) on the vehicle, one control step every ``h`` seconds (the
+configuration's sample time), through the same compiled slots as the simulator
+(rovlab.sim.step.control_step), so fed the samples of a simulation it computes the
+simulation's estimates and commands exactly. The ROS 2, ROS 1 and MAVLink adapters and the HMI
+all sit on it; it imports no middleware and does no maths of its own.
+
+API (stable; additions only)::
+
+    core = NodeCore(vehicle, config)            # designs and compiles once (says so on stderr)
+    core.push(sensor, quantity, value, stamp)   # -> "accepted" | "late" | "out-of-order" | ...
+    core.set_reference(z=2.0, psi=0.5)          # engages the controller (until then: neutral PWM)
+    for out in core.tick(now):                  # runs the steps that are due; never blocks
+        publish(out.x, out.P, out.channel_status, out.tau, out.pwm_us)
+    core.apply(config=new_config)               # redesign, keep the state; ConfigError: no change
+    core.set_sensor_enabled("qualisys", False)  # its samples are dropped (the filter times it out)
+    core.set_filter_mode("qualisys.z", "off")   # force a channel off / on / back to "auto"
+
+Units and frames are rovlab's (SI, radians, NED world, FRD body): adapters convert at their edge.
+
+**Clock.** Times (``stamp``, ``now``) are seconds on the adapter's clock (ROS time, Unix time,
+a test's counter). Step k is due at T_k = t0 + k h; t0 is the stamp of the first sample pushed
+(or ``now`` of the first :meth:`tick` if none came), so the steps line up with a sensor that
+samples at the control rate. The filter sees the time k h.
+
+**Samples.** A sample belongs to the step nearest its stamp. Per channel, the newest sample for
+a step at or before the current one is used; what else can happen is returned by :meth:`push`
+and counted in :attr:`counters`:
+
+* ``accepted``: stored for its step (a newer sample of the same channel for the same or a later
+  step replaces an older one: ``replaced`` is counted);
+* ``late``: its step is more than ``max_lag`` steps before the next one (default 1: a sample that
+  arrived just after its step ran is still used at the next step);
+* ``out-of-order``: not newer than a sample of the same channel already stored or used;
+* ``unused``: no filter channel fuses this sensor quantity (e.g. motion capture x); not an error;
+* ``disabled``: the sensor is switched off (:meth:`set_sensor_enabled`);
+* ``future``: stamped more than ``max_ahead_s`` after the step being collected (clock mismatch);
+  dropped;
+* ``invalid``: not a finite number or timestamp (``last_problem`` says what and where).
+
+A step runs as soon as every enabled channel has its sample (low latency), and at the latest at
+T_k + ``collect_s`` (default h / 2) with whatever arrived: a channel without a sample is a missing
+sample, which the filter's sensor management handles (dead reckoning, timeout -> lost). A step
+due while earlier ones were not run (the adapter stalled) is preceded by those, each without
+samples (dead reckoning), up to ``max_catch_up`` steps; after a longer gap the clock is
+re-based on ``now`` (counted as ``rebased``) and the filter keeps its state.
+
+**Reference.** Until :meth:`set_reference` is first called the controller is not engaged: the
+demanded wrench is zero and the PWM commands are neutral, while the filter runs.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rovlab.core.components import N_TRUTH, TRUTH, TRUTH_INDEX, fresh, restore, state_of
+from rovlab.estimation.fusion import (
+    CH_MODE,
+    CH_REASON,
+    CH_STATUS,
+    MODE_AUTO,
+    MODE_NAMES,
+    MODE_OFF,
+    MODE_ON,
+    N_REP,
+    new_channel_state,
+    status_label,
+)
+from rovlab.io.messages import command_message, estimate_message, measurement_message, reference_message
+from rovlab.params.design import DesignConfig
+from rovlab.params.vehicle import Vehicle
+from rovlab.sim.actuators import make_actuators
+from rovlab.sim.runner import Design, make_design
+
+SAMPLE_RESULTS = ("accepted", "late", "out-of-order", "unused", "disabled", "future", "invalid")
+_MODES = {"auto": MODE_AUTO, "off": MODE_OFF, "on": MODE_ON}
+_COMPILED: set[tuple[type, ...]] = set()  # component types whose step this process has compiled
+
+
+@dataclass(frozen=True)
+class ChannelInfo:
+    """A measurement the filter fuses (names as in the simulator's logs)."""
+
+    name: str  # "<sensor>.<quantity>", e.g. "qualisys.z"
+    sensor: str
+    quantity: str  # z, psi, w or r (rovlab.core.components.TRUTH)
+    column: str  # "<quantity>_<sensor>"
+    offset: float  # lever-arm offset the filter subtracts from the raw sample [m]
+
+
+@dataclass(frozen=True, eq=False)
+class NodeOutput:
+    """What one control step hands out (SI units, radians, NED/FRD). Arrays are copies."""
+
+    k: int  # step index
+    t: float  # filter time k h [s]
+    stamp: float  # T_k on the adapter's clock [s] (the time the estimate refers to)
+    states: tuple[str, ...]  # names of x's entries (e.g. z, psi, w, r, b_w, b_r)
+    x: np.ndarray  # corrected estimate at T_k
+    P: np.ndarray  # its covariance (n x n)
+    nav: np.ndarray  # the estimate in the TRUTH layout (x, y, z, psi, u, v, w, r, b_X, b_Y, b_Z, b_N; 0 = not estimated)
+    estimated: tuple[str, ...]  # the TRUTH quantities the estimator estimates
+    channels: tuple[str, ...]
+    channel_status: tuple[str, ...]  # per channel: 'ok', 'recovering', 'off', 'lost-timeout', ...
+    sensor_status: dict[str, str]  # per sensor: its worst channel's status
+    y: np.ndarray  # the samples used at this step (NaN: none)
+    innovation: np.ndarray  # per channel: the prior innovation (NaN without a usable sample)
+    reference: np.ndarray  # [x, y, z, psi]
+    engaged: bool  # False: no reference yet, neutral thrusters
+    tau: np.ndarray  # demanded wrench [X, Y, Z, N]
+    tau_achieved: np.ndarray  # what the allocation achieved [X, Y, Z, N] (the filter's input)
+    thrusters: tuple[str, ...]
+    pwm_us: np.ndarray  # PWM command per thruster, the vehicle file's order [us]
+    controller_state: dict[str, float] = field(default_factory=dict)
+    channel_columns: tuple[str, ...] = ()  # per channel, its log column ('z_qualisys' ...)
+
+    def variance(self) -> dict[str, float]:
+        return {s: float(self.P[i, i]) for i, s in enumerate(self.states)}
+
+    def messages(self, *, outputs: tuple[str, ...] = ("X", "Y", "Z", "N")) -> list[tuple[str, float, dict[str, Any]]]:
+        """The step as rovlab.io.messages (the topics the simulator publishes, without truth):
+        estimate, measurement, reference, command; channels named by their log columns as in the
+        simulator's messages. ``outputs``: the wrench entries the controller commands."""
+        t = self.t
+        cols = self.channel_columns or self.channels
+        status = dict(zip(cols, self.channel_status))
+        out = [("/rovlab/estimate", t, estimate_message(t, dict(zip(self.states, self.x)), self.variance(), status)),
+               ("/rovlab/measurement", t, measurement_message(t, dict(zip(cols, self.y)))),
+               ("/rovlab/reference", t, reference_message(t, {"z": self.reference[2], "psi": self.reference[3]})),
+               ("/rovlab/command", t, command_message(
+                   t, {o: self.tau["XYZN".index(o)] for o in outputs}, dict(zip(self.thrusters, self.pwm_us)),
+                   self.controller_state))]
+        return out
+
+
+class NodeCore:
+    """The estimator and controller of a vehicle, stepped on their own clock (see the module)."""
+
+    def __init__(self, vehicle: Vehicle, config: DesignConfig, *, estimator: str | None = None,
+                 controller: str | None = None, pwm_resolution_us: float = 1.0, collect_s: float | None = None,
+                 max_lag: int = 1, max_ahead_s: float = 1.0, max_catch_up: int = 600,
+                 log: Callable[[str], None] | None = None) -> None:
+        self._lock = threading.RLock()
+        self._log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
+        self._names = (estimator, controller)
+        self.pwm_resolution_us = float(pwm_resolution_us)
+        self.max_lag = int(max_lag)
+        self.max_ahead_s = float(max_ahead_s)
+        self.max_catch_up = int(max_catch_up)
+        self._collect = collect_s
+        self.counters: dict[str, int] = {r: 0 for r in SAMPLE_RESULTS} | {"replaced": 0, "steps": 0, "rebased": 0}
+        self.last_problem = ""
+        self.last: NodeOutput | None = None
+        self.sensor_enabled: dict[str, bool] = {}
+        self.reference = np.zeros(4)
+        self.engaged = False
+        self.k = 0
+        self.t0: float | None = None
+        self._install(make_design(vehicle, config, plant="process", plant_step=config.sample_time,
+                                  estimator=estimator, controller=controller), keep=None)
+
+    # -- what is running -----------------------------------------------------------------------
+    @property
+    def h(self) -> float:
+        return float(self.design.estimator.h)
+
+    @property
+    def vehicle(self) -> Vehicle:
+        return self.design.vehicle
+
+    @property
+    def config(self) -> DesignConfig:
+        return self.design.config
+
+    @property
+    def collect_s(self) -> float:
+        return 0.5 * self.h if self._collect is None else float(self._collect)
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        return tuple(self.design.estimator.states)
+
+    @property
+    def thrusters(self) -> tuple[str, ...]:
+        return tuple(self.design.allocator.bank.names)
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        """The sensors the filter fuses, in channel order."""
+        return tuple(dict.fromkeys(c.sensor for c in self.channels))
+
+    def sensor_of_kind(self, kind: str) -> str | None:
+        """The first fused sensor of a vehicle-file kind ('pressure', 'motion_capture', 'imu' ...)."""
+        return next((c.sensor for c, k in zip(self.channels, self._kinds) if k == kind), None)
+
+    @property
+    def controller_name(self) -> str:
+        return self._names[1] or self.config.controller
+
+    @property
+    def estimator_name(self) -> str:
+        return self._names[0] or self.config.estimator
+
+    @property
+    def time(self) -> float:
+        """Filter time of the next step [s]."""
+        return self.k * self.h
+
+    def next_due(self) -> float | None:
+        """Adapter time at which the next step runs at the latest (None before the first sample)."""
+        return None if self.t0 is None else self.t0 + self.k * self.h + self.collect_s
+
+    # -- inputs --------------------------------------------------------------------------------
+    def push(self, sensor: str, quantity: str, value: float, stamp: float) -> str:
+        """Offer one sample (rovlab units: z [m] of the sensor, psi [rad], w [m/s], r [rad/s]);
+        returns what happened to it (see the module). Never raises on bad data."""
+        with self._lock:
+            j = self._channel_index.get((sensor, quantity))
+            if j is None:
+                return self._count("unused")
+            if not self.sensor_enabled.get(sensor, True):
+                return self._count("disabled")
+            try:
+                v, s = float(value), float(stamp)
+            except (TypeError, ValueError):
+                return self._problem(f"{sensor}.{quantity}: sample {value!r} at {stamp!r} is not a number")
+            if not math.isfinite(s):
+                return self._problem(f"{sensor}.{quantity}: timestamp {stamp!r} is not finite")
+            if not math.isfinite(v):
+                return self._problem(f"{sensor}.{quantity}: value {value!r} is not finite")
+            if self.t0 is None:
+                self.t0 = s
+            if s <= self._stamp[j]:
+                return self._count("out-of-order")
+            step = int(math.floor((s - self.t0) / self.h + 0.5))
+            if step < self.k - self.max_lag:
+                return self._count("late")
+            if s > self.t0 + self.k * self.h + self.max_ahead_s:
+                return self._count("future")
+            if not math.isnan(self._pending_stamp[j]):
+                self.counters["replaced"] += 1
+            self._pending[j] = v
+            self._pending_stamp[j] = s
+            self._pending_step[j] = step
+            self._stamp[j] = s
+            return self._count("accepted")
+
+    def set_reference(self, *, z: float | None = None, psi: float | None = None, x: float | None = None,
+                      y: float | None = None) -> None:
+        """New set-point (NED: depth z [m] >= 0, heading psi [rad]); engages the controller.
+        ValueError (nothing changes) for a value that is not finite or a negative depth."""
+        new = self.reference.copy()
+        for i, (name, v) in enumerate((("x", x), ("y", y), ("z", z), ("psi", psi))):
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"reference {name} must be a finite number, got {v!r}")
+            new[i] = float(v)
+        if z is not None and new[2] < 0.0:
+            raise ValueError(f"reference depth z must be >= 0 m (the free surface is z = 0), got {z!r}")
+        if psi is not None:
+            new[3] = math.remainder(new[3], 2.0 * math.pi)
+        with self._lock:
+            if not self.engaged and z is None:
+                new[2] = max(0.0, float(self._nav[TRUTH_INDEX["z"]]))  # hold the estimated depth
+            if not self.engaged and psi is None:
+                new[3] = float(self._nav[TRUTH_INDEX["psi"]])
+            self.reference = new
+            self.engaged = True
+
+    def disengage(self) -> None:
+        """Stop commanding: zero wrench, neutral PWM (the filter keeps running)."""
+        with self._lock:
+            self.engaged = False
+
+    def set_sensor_enabled(self, sensor: str, enabled: bool) -> None:
+        """Switch a sensor off (its samples are dropped, so the filter times it out) or back on."""
+        if sensor not in self.sensor_enabled:
+            raise ValueError(f"unknown sensor {sensor!r}; the filter fuses {', '.join(self.sensor_enabled)}")
+        with self._lock:
+            self.sensor_enabled[sensor] = bool(enabled)
+            if not enabled:
+                for j, c in enumerate(self.channels):
+                    if c.sensor == sensor:
+                        self._pending_stamp[j] = math.nan
+
+    def set_filter_mode(self, channel: str, mode: str) -> None:
+        """Force a filter channel 'off' or 'on', or back to 'auto'."""
+        if mode not in _MODES:
+            raise ValueError(f"mode must be one of {', '.join(_MODES)}, got {mode!r}")
+        names = [c.name for c in self.channels]
+        if channel not in names:
+            raise ValueError(f"unknown channel {channel!r}; the filter has {', '.join(names)}")
+        with self._lock:
+            self.estimator.ch[names.index(channel), CH_MODE] = _MODES[mode]
+
+    def filter_modes(self) -> dict[str, str]:
+        return {c.name: MODE_NAMES[int(self.estimator.ch[j, CH_MODE])] for j, c in enumerate(self.channels)}
+
+    def apply(self, *, vehicle: Vehicle | None = None, config: DesignConfig | None = None) -> None:
+        """Swap in a new model vehicle and/or configuration (designed first: ConfigError and no
+        change on failure), keeping the estimate, covariance, controller state and, by channel
+        name, the channels' modes. The sample time cannot change while the node runs."""
+        from rovlab.params.validate import ConfigError, Problem
+
+        v = vehicle if vehicle is not None else self.vehicle
+        c = config if config is not None else self.config
+        if abs(c.sample_time - self.config.sample_time) > 1e-12:
+            raise ConfigError([Problem(c.file or c.name, "sample_time", c.sample_time,
+                                       f"the running node's {self.config.sample_time:g} s (restart the node to change it)")],
+                              "filter configuration")
+        design = make_design(v, c, plant="process", plant_step=c.sample_time,
+                             estimator=self._names[0], controller=self._names[1])
+        with self._lock:
+            self._install(design, keep=(self.estimator, self.controller, self.channels))
+
+    # -- stepping ------------------------------------------------------------------------------
+    def tick(self, now: float) -> list[NodeOutput]:
+        """Run the steps due at adapter time ``now`` (none, one, or a few after a stall)."""
+        with self._lock:
+            if self.t0 is None:
+                self.t0 = float(now)
+            out: list[NodeOutput] = []
+            # steps whose deadline T_j + collect_s has passed: j <= (now - collect_s - t0) / h
+            behind = int(math.floor((now - self.collect_s - self.t0) / self.h + 1e-9)) - self.k + 1
+            if behind > self.max_catch_up:
+                self.counters["rebased"] += 1
+                self._log(f"rovlab node: {behind} control steps behind (the process stalled {behind * self.h:.1f} s): "
+                          "re-basing the clock; the filter keeps its state")
+                self.t0 = float(now) - self.collect_s - self.k * self.h  # the next step is due now
+                behind = 1
+            for _ in range(max(behind, 0)):
+                out.append(self._step(now))
+            if self._complete():  # every channel has its sample for the current step: run it now
+                if now >= self.t0 + self.k * self.h - 0.5 * self.h:
+                    out.append(self._step(now))
+            return out
+
+    # -- internals -----------------------------------------------------------------------------
+    def _count(self, result: str) -> str:
+        self.counters[result] += 1
+        return result
+
+    def _problem(self, message: str) -> str:
+        self.last_problem = message
+        return self._count("invalid")
+
+    def _complete(self) -> bool:
+        want = [j for j, c in enumerate(self.channels) if self.sensor_enabled.get(c.sensor, True)
+                and self.estimator.ch[j, CH_MODE] != MODE_OFF and self._expected[j]]
+        return bool(want) and all(not math.isnan(self._pending_stamp[j]) and self._pending_step[j] == self.k
+                                  for j in want)
+
+    def _step(self, now: float) -> NodeOutput:
+        k = self.k
+        y, present = self._y, self._present
+        for j in range(len(self.channels)):
+            use = not math.isnan(self._pending_stamp[j]) and self._pending_step[j] <= k
+            present[j] = use
+            y[j] = self._pending[j] if use else math.nan
+            if use:
+                self._pending_stamp[j] = math.nan
+        t = k * self.h
+        self._kernel(t, self.estimator, self.controller, self.actuators, self._nav_of, y, present, self.reference,
+                     self.engaged, self._rep, self._nav, self._tau, self._tau_cmd, self._tau_real, self._pwm,
+                     self._x, self._P)
+        self.k = k + 1
+        self.counters["steps"] += 1
+        out = self._output(k, t)
+        self.last = out
+        return out
+
+    def _output(self, k: int, t: float) -> NodeOutput:
+        ch = self.estimator.ch
+        labels = tuple(status_label(int(ch[j, CH_STATUS]), int(ch[j, CH_REASON])) for j in range(len(self.channels)))
+        by_sensor: dict[str, str] = {}
+        rank = {"ok": 0, "recovering": 1, "off": 2}
+        for c, label in zip(self.channels, labels):
+            old = by_sensor.get(c.sensor)
+            if old is None or rank.get(label, 3) > rank.get(old, 3):
+                by_sensor[c.sensor] = label
+        for s, on in self.sensor_enabled.items():
+            if not on:
+                by_sensor[s] = "disabled"
+        ctl = self.design.controller
+        assert self.t0 is not None
+        return NodeOutput(
+            k=k, t=t, stamp=self.t0 + t, states=self.states, x=self._x.copy(), P=self._P.copy(), nav=self._nav.copy(),
+            estimated=tuple(self.design.estimator.nav), channels=tuple(c.name for c in self.channels),
+            channel_status=labels, sensor_status=by_sensor, y=self._y.copy(), innovation=self._rep[:, 1].copy(),
+            reference=self.reference.copy(), engaged=self.engaged, tau=self._tau.copy(),
+            tau_achieved=self._tau_cmd.copy(), thrusters=self.thrusters, pwm_us=self._pwm.copy(),
+            controller_state={n: float(v) for n, v in zip(ctl.state_names, self.controller.state)},
+            channel_columns=tuple(c.column for c in self.channels))
+
+    def _install(self, design: Design, keep: tuple[Any, Any, tuple[ChannelInfo, ...]] | None) -> None:
+        """Make ``design`` the running one (compiling its step if this process has not yet)."""
+        from rovlab.sim.step import control_step_for
+
+        est = fresh(design.estimator.kernel)
+        ctl = fresh(design.controller.kernel)
+        alloc = design.allocator
+        act = make_actuators(alloc, alloc.bank, alloc.B, self.pwm_resolution_us)
+        channels = tuple(ChannelInfo(c.name, c.sensor, c.quantity, c.column, float(c.offset))
+                         for c in design.estimator.channels)
+        m, n = len(channels), est.x.shape[0]
+        if keep is not None:
+            old_est, old_ctl, old_channels = keep
+            saved = state_of(old_est)
+            saved.pop("ch", None)
+            restore(est, saved)
+            restore(ctl, state_of(old_ctl))
+            old_names = [c.name for c in old_channels]
+            new_names = [c.name for c in channels]
+            if new_names == old_names:
+                est.ch[...] = old_est.ch
+            else:
+                chs = new_channel_state(m)
+                for j, name in enumerate(new_names):
+                    if name in old_names:
+                        chs[j, CH_MODE] = old_est.ch[old_names.index(name), CH_MODE]
+                est.ch[...] = chs
+        kernel = control_step_for(est, ctl)
+        key = (type(est), type(ctl))
+        if key not in _COMPILED:
+            started = time.perf_counter()
+            self._log(f"rovlab node: preparing the compiled control step ({type(est).__name__} + "
+                      f"{type(ctl).__name__}); the first run on a machine compiles it (about a minute), "
+                      "later runs load it from the cache ...")
+            # warm-up on copies, with no samples: the running state is not touched
+            ew, cw = fresh(est), fresh(ctl)
+            nav_of = np.array([TRUTH_INDEX[q] for q in design.estimator.nav], dtype=np.int64)
+            kernel(0.0, ew, cw, act, nav_of, np.full(m, np.nan), np.zeros(m, dtype=np.bool_), np.zeros(4), True,
+                   np.empty((m, N_REP)), np.zeros(N_TRUTH), np.zeros(4), np.zeros(4), np.zeros(4),
+                   np.empty(len(alloc.bank.names)), np.empty(n), np.empty((n, n)))
+            _COMPILED.add(key)
+            self._log(f"rovlab node: control step ready ({time.perf_counter() - started:.1f} s)")
+        self.design = design
+        self.estimator, self.controller, self.actuators = est, ctl, act
+        self.channels = channels
+        self._kinds = tuple(c.kind for c in design.estimator.channels)
+        self._channel_index = {(c.sensor, c.quantity): j for j, c in enumerate(channels)}
+        self._kernel = kernel
+        self._nav_of = np.array([TRUTH_INDEX[q] for q in design.estimator.nav], dtype=np.int64)
+        rates = {c.sensor: design.vehicle.sensor(c.sensor).rate_hz for c in design.estimator.channels}
+        self._expected = [rates[c.sensor] * design.estimator.h >= 1.0 - 1e-9 for c in channels]  # a sample every step
+        self.sensor_enabled = {s: self.sensor_enabled.get(s, True) for s in dict.fromkeys(c.sensor for c in channels)}
+        old_pending = getattr(self, "_pending", None)
+        if old_pending is None or len(old_pending) != m:
+            self._pending = np.full(m, np.nan)
+            self._pending_stamp = np.full(m, np.nan)
+            self._pending_step = np.zeros(m, dtype=np.int64)
+            self._stamp = np.full(m, -np.inf)
+        self._y = np.full(m, np.nan)
+        self._present = np.zeros(m, dtype=np.bool_)
+        self._rep = np.full((m, N_REP), np.nan)
+        if getattr(self, "_nav", None) is None:
+            self._nav = np.zeros(N_TRUTH)
+        self._tau = np.zeros(4)
+        self._tau_cmd = np.zeros(4)
+        self._tau_real = np.zeros(4)
+        self._pwm = np.empty(len(alloc.bank.names))
+        self._x = est.x.copy()
+        self._P = est.P.copy()
+
+
+__all__ = ["TRUTH", "SAMPLE_RESULTS", "ChannelInfo", "NodeCore", "NodeOutput"]

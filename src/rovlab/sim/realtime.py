@@ -1,0 +1,127 @@
+"""A simulated vehicle stepped from outside: PWM commands in, truth and sensor samples out.
+
+The other half of the vehicle node (rovlab.interfaces.node): where the closed-loop simulator runs
+estimator, controller and plant in one compiled loop, a :class:`SimulatedVehicle` runs only the
+plant and the sensors of a scenario, one control period per :meth:`SimulatedVehicle.step`, with
+the thrust of whatever PWM commands it was last given. A middleware adapter paces it in real time
+and publishes its samples on the vehicle's topics, so the node runs against it as against the
+real vehicle. Same components, same noise model, same drop-out windows and truth events as the
+scenario's batch run (rovlab.sim.step.plant_push / plant_sample).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from rovlab.core.components import N_TRUTH, TRUTH, fresh, plant_draws
+from rovlab.params.design import DesignConfig
+from rovlab.params.vehicle import Vehicle
+from rovlab.sim.loop import Drive, draw
+from rovlab.sim.runner import DesignBook, disturbances, prepare, schedule
+from rovlab.sim.scenario import Scenario, load_scenario
+
+_CHUNK = 600  # control steps of noise drawn at a time
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleSample:
+    """What the simulated vehicle gives at step k (SI units, radians, NED/FRD)."""
+
+    k: int
+    t: float  # k h [s]
+    truth: dict[str, float]  # TRUTH layout by name
+    samples: tuple[tuple[str, str, float], ...]  # (sensor, quantity, raw value incl. lever arm) that arrived
+    reference: tuple[float, float]  # the scenario's schedule at t: (z [m], psi [rad])
+    tau: np.ndarray  # wrench [X, Y, Z, N] the commands gave over the last period
+
+
+class SimulatedVehicle:
+    """A scenario's plant and sensors, advanced one control period at a time (not thread-safe)."""
+
+    def __init__(self, scenario: str | Scenario, *, seed: int | None = None, vehicle: Vehicle | None = None,
+                 truth: Vehicle | None = None, config: DesignConfig | None = None) -> None:
+        from rovlab.models.thrusters import bank_pwm
+
+        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, seed=seed)
+        seed = self.scenario.seed if seed is None else seed
+        self.prep = prepare(replace(self.scenario, duration_s=0.0), vehicle=vehicle, truth=truth, config=config,
+                            book=DesignBook())
+        self.plant = fresh(self.prep.plant)
+        self.rng = np.random.default_rng(seed)
+        self.rng.standard_normal(4)  # the initial bias draw, as in rovlab.sim.runner.prepare
+        act = self.prep.actuators
+        self.neutral_pwm = np.asarray(bank_pwm(act.rows, act.grid_pwm, act.grid_force, np.zeros(act.rows.shape[0])))
+        self.pwm = self.neutral_pwm.copy()
+        self.k = 0
+        self._k0 = 0
+        self._drive: Drive | None = None
+        m = len(self.prep.channels)
+        self._truth = np.empty(N_TRUTH)
+        self._y = np.empty(m)
+        self._present = np.zeros(m, dtype=np.bool_)
+        self._tau = np.zeros(4)
+        self.unavailable: set[str] = set()
+
+    @property
+    def h(self) -> float:
+        return float(self.prep.h)
+
+    @property
+    def thrusters(self) -> tuple[str, ...]:
+        return tuple(self.prep.allocator.bank.names)
+
+    @property
+    def channels(self) -> tuple[Any, ...]:
+        """The filter channels the sensors serve (rovlab.estimation.model.Channel)."""
+        return tuple(self.prep.channels)
+
+    def sensor_kind(self, sensor: str) -> str:
+        return self.prep.truth.sensor(sensor).kind
+
+    def set_pwm(self, pwm_us: Any) -> None:
+        """The thrusters' PWM commands [us], in the vehicle file's order (held until the next call).
+        ValueError, and the old commands kept, for a wrong length or a value that is not finite."""
+        try:
+            a = np.asarray(pwm_us, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(f"PWM commands must be numbers, got {pwm_us!r}") from None
+        if a.shape[0] != len(self.thrusters):
+            raise ValueError(f"{a.shape[0]} PWM commands for {len(self.thrusters)} thrusters "
+                             f"({', '.join(self.thrusters)})")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"PWM commands must be finite, got {a.tolist()}")
+        self.pwm = a.copy()
+
+    def step(self) -> VehicleSample:
+        """Advance to the next control step (the first call gives step 0 without advancing)."""
+        from rovlab.sim.step import plant_push, plant_sample
+
+        k = self.k
+        if k > 0:
+            drive = self._chunk_for(k - 1)
+            plant_push(self.plant, self.prep.actuators, drive, k - 1 - self._k0, self.pwm, self._tau)
+        drive = self._chunk_for(k)
+        if not plant_sample(k, self.plant, self.prep.sensors, drive, k - self._k0, self._truth, self._y,
+                            self._present):
+            raise RuntimeError(f"the simulated plant diverged at t = {k * self.h:g} s")
+        samples = tuple((c.sensor, c.quantity, float(self._y[j])) for j, c in enumerate(self.prep.channels)
+                        if self._present[j] and c.sensor not in self.unavailable)
+        t = k * self.h
+        self.k = k + 1
+        return VehicleSample(k, t, dict(zip(TRUTH, map(float, self._truth))), samples,
+                             self.scenario.reference_at(t), self._tau.copy())
+
+    def _chunk_for(self, k: int) -> Drive:
+        if self._drive is None or not (self._k0 <= k < self._k0 + _CHUNK):
+            prep, sc = self.prep, self.scenario
+            times = (k + np.arange(_CHUNK)) * self.h
+            dropout, refs = schedule(sc, prep.channels, times)
+            plant_n, bias_n, sensor_n = draw(self.rng, _CHUNK, prep.plant.n_sub, plant_draws(prep.plant),
+                                             len(prep.channels))
+            heave, pset = disturbances(sc, times, observer=sc.plant == "observer", g=prep.truth.gravity)
+            self._drive = Drive(plant_n, bias_n, sensor_n, dropout, refs, heave, pset)
+            self._k0 = k
+        return self._drive

@@ -1,0 +1,105 @@
+"""One control step and one plant step, compiled: the closed loop of rovlab.sim.loop cut in two
+halves for a vehicle that runs in real time (the node on the vehicle, a simulated vehicle on the
+same topics).
+
+:func:`control_step` is what the loop does between sampling the sensors and advancing the plant
+(estimator correct -> controller -> allocation and PWM -> estimator predict -> controller
+actuated), for one sample and through the same slot functions (rovlab.core.components), so a
+node fed the samples of a simulation computes exactly the simulation's estimates and commands.
+:func:`plant_push` and :func:`plant_sample` are the other half: the thrust the PWM commands give and
+the plant advanced one control period with it; the truth and the sensor samples at a step.
+
+Nothing here is new maths: both are sequences of existing kernels. They are compiled once per
+combination of component types and cached on disk like the loop (:func:`control_step_for`
+picks the uncached copy for components defined outside rovlab, as rovlab.sim.loop.loop_for).
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+from rovlab.core.components import (
+    controller_actuated,
+    controller_step,
+    estimator_correct,
+    estimator_predict,
+    plant_advance,
+    plant_truth,
+)
+from rovlab.models.sensors import sample_sensors
+from rovlab.models.thrusters import bank_force
+from rovlab.sim.actuators import actuate
+
+_DOF6 = (0, 1, 2, 5)  # X, Y, Z, N in the 6-DOF wrench [X, Y, Z, K, M, N]
+
+
+@njit(cache=True)
+def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, rep, nav, tau, tau_cmd, tau_real, pwm,
+                 x_out, P_out):
+    """One control step at time t [s] with the samples y (NaN where ``present`` is False).
+
+    Fills: rep (m x N_REP, the estimator's per-channel report), x_out / P_out (the corrected
+    estimate and covariance at t), nav (N_TRUTH, the estimate in the TRUTH layout the controller
+    reads), tau (4, demanded wrench), tau_cmd (4, the wrench the allocation achieved), tau_real
+    (4, what the PWM commands give on the model vehicle), pwm (thrusters, PWM [us]). With
+    ``engaged`` False the controller is not run and the demanded wrench is zero (neutral
+    thrusters); the estimator still corrects and predicts with the zero wrench.
+    """
+    estimator_correct(est, t, y, present, rep)
+    n = est.x.shape[0]
+    for i in range(n):
+        x_out[i] = est.x[i]
+        for j in range(n):
+            P_out[i, j] = est.P[i, j]
+        nav[nav_of[i]] = est.x[i]
+    if engaged:
+        controller_step(ctrl, t, nav, ref, tau)
+    else:
+        for i in range(4):
+            tau[i] = 0.0
+    actuate(act, tau, tau_cmd, tau_real, pwm)
+    estimator_predict(est, t, tau_cmd)
+    if engaged:
+        controller_actuated(ctrl, t, tau, tau_cmd)
+
+
+control_step_uncached = njit(cache=False)(control_step.py_func)
+
+
+def control_step_for(*components: object):
+    """The compiled control step for these components (disk-cached when all are rovlab's own)."""
+    if all(type(c).__module__.startswith("rovlab.") for c in components):
+        return control_step
+    return control_step_uncached
+
+
+@njit(cache=True)
+def plant_push(plant, act, drive, row, pwm, tau_real):
+    """Advance the plant one control period (noise of ``row`` of ``drive``) with the thrust the
+    PWM commands ``pwm`` give; ``tau_real`` (4) receives that wrench [X, Y, Z, N] on the plant's
+    true vehicle (act.B_true, act.rows)."""
+    f = bank_force(act.rows, act.grid_pwm, act.grid_force, pwm)
+    for a in range(4):
+        r = _DOF6[a]
+        acc = 0.0
+        for i in range(f.shape[0]):
+            acc += act.B_true[r, i] * f[i]
+        tau_real[a] = acc
+    plant_advance(plant, drive, row, tau_real, tau_real)
+
+
+@njit(cache=True)
+def plant_sample(k, plant, sensors, drive, row, truth, y, present):
+    """The plant's truth at t_k into ``truth`` (N_TRUTH) and the sensor samples of step k into y /
+    present (noise and drop-outs of ``row`` of ``drive``). Returns False when the truth is no
+    longer finite (the plant diverged)."""
+    plant_truth(plant, truth)
+    for i in range(truth.shape[0]):
+        if not abs(truth[i]) < 1e9:
+            return False
+    sample_sensors(sensors, truth, k, drive.sensor_normals, drive.dropout, row, y, present)
+    return True
+
+
+plant_push_uncached = njit(cache=False)(plant_push.py_func)
+plant_sample_uncached = njit(cache=False)(plant_sample.py_func)
