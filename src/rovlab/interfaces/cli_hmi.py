@@ -22,6 +22,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speed", type=float, default=1.0, help="times real time (0.1 to 50, default 1)")
     p.add_argument("--paused", action="store_true", help="start paused (press Start in the page)")
     p.add_argument("--out", default="out/hmi", help="folder for saved parameters and the session log (default out/hmi)")
+    p.add_argument("--source", choices=("simulation", "mavlink"), default="simulation",
+                   help="simulation (default) or mavlink: an ArduSub vehicle through rovlab's MAVLink bridge "
+                        "(--connect; --vehicle/--config default to bluerov2_heavy)")
+    p.add_argument("--connect", default="udpin:127.0.0.1:14550",
+                   help="with --source mavlink: pymavlink connection string (default udpin:127.0.0.1:14550)")
+    p.add_argument("--arm", action="store_true", help="with --source mavlink: set MANUAL and arm the vehicle")
+    p.add_argument("--record", default=None, help="with --source mavlink: record the telemetry to this MCAP file")
     p.set_defaults(func=_cmd_hmi)
 
 
@@ -40,14 +47,41 @@ def _cmd_hmi(args: argparse.Namespace) -> int:
         raise UserError(f"--speed must be {SPEED_RANGE[0]:g} .. {SPEED_RANGE[1]:g}, got {args.speed:g}")
     if args.seed is not None and args.seed < 0:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
-    session = Session.simulation(args.scenario, vehicle=args.vehicle, config=args.config, seed=args.seed,
-                                 out_dir=Path(args.out), speed=args.speed, running=not args.paused)
+    source = None
+    if args.source == "mavlink":
+        session, source = _mavlink_session(args)
+    else:
+        session = Session.simulation(args.scenario, vehicle=args.vehicle, config=args.config, seed=args.seed,
+                                     out_dir=Path(args.out), speed=args.speed, running=not args.paused)
     served: list[bool] = []  # set once the server listens: before that nobody could log anything
     try:
         return asyncio.run(_serve(session, args.port, served))
     finally:
+        if source is not None:
+            source.close()  # neutral commands, disarm what it armed, close the recording
         if served:
             _write_log(session)
+
+
+def _mavlink_session(args: argparse.Namespace):
+    """A session on an ArduSub vehicle through the MAVLink bridge (rovlab.interfaces.mavlink)."""
+    from rovlab.interfaces.cli_mavlink import make_bridge
+    from rovlab.interfaces.hmi.session import Session
+
+    vehicle = args.vehicle or "bluerov2_heavy"
+    config = args.config or "bluerov2_heavy"
+    bridge_args = argparse.Namespace(connect=args.connect, vehicle=vehicle, config=config, target_system=1, sysid=255,
+                                     command="manual_control", command_hz=None, telemetry_timeout=0.5, arm=args.arm,
+                                     record=args.record)
+    bridge = make_bridge(bridge_args, lambda text: print(f"rovlab hmi: mavlink: {text}", file=sys.stderr, flush=True))
+    from rovlab.interfaces.mavlink.source import MavlinkSource
+
+    source = MavlinkSource(bridge)
+    try:
+        return Session.for_vehicle(source, vehicle=vehicle, config=config, out_dir=Path(args.out)), source
+    except Exception:
+        source.close()
+        raise
 
 
 async def _serve(session, port: int, served: list[bool]) -> int:
@@ -63,8 +97,11 @@ async def _serve(session, port: int, served: list[bool]) -> int:
                         "(use --port 0 for a free port)") from None
     served.append(True)
     src = session.source.describe()
-    print(f"rovlab hmi: {src['scenario']['name']} with {src['vehicle']} / {src['config']} "
-          f"({'running' if session.running else 'paused'}, {session.speed:g}x real time)")
+    if session.source.paced:
+        print(f"rovlab hmi: {src['scenario']['name']} with {src['vehicle']} / {src['config']} "
+              f"({'running' if session.running else 'paused'}, {session.speed:g}x real time)")
+    else:
+        print(f"rovlab hmi: {src['scenario']['name']} with {src['vehicle']} / {src['config']} (its own clock)")
     print(f"rovlab hmi: open {url} in a browser (Ctrl-C stops; the session log goes to {session.log.folder}/)",
           flush=True)
     stop = asyncio.Event()

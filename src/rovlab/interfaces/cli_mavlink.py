@@ -31,6 +31,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                                 "until Ctrl-C)")
     s.set_defaults(func=_cmd_sim)
 
+    b = cmds.add_parser("bridge", help="run rovlab's estimator (and controller) on an ArduSub vehicle over MAVLink")
+    add_bridge_arguments(b)
+    b.add_argument("--depth", type=float, default=None,
+                   help="depth set-point [m]: engages the controller (default: estimate only, command nothing)")
+    b.add_argument("--heading-deg", type=float, default=None, help="heading set-point [deg] (with --depth; default: "
+                                                                  "the estimated heading when engaged)")
+    b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: Ctrl-C)")
+    b.add_argument("--status-every", type=float, default=2.0, help="print the estimate every N s (0: never)")
+    b.set_defaults(func=_cmd_bridge)
+
     r = cmds.add_parser("record", help="record a vehicle's MAVLink telemetry to MCAP (a listener: sends nothing)")
     r.add_argument("--connect", default="udpin:127.0.0.1:14550",
                    help="pymavlink connection string (default udpin:127.0.0.1:14550, where a vehicle sends)")
@@ -47,6 +57,53 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="surface pressure [hPa] (default: BARO2_GND_PRESS from the log, else 1013.25)")
     c.add_argument("--out", required=True, help="CSV file to write")
     c.set_defaults(func=_cmd_convert)
+
+
+def add_bridge_arguments(p: argparse.ArgumentParser, *, connect_default: str = "udpin:127.0.0.1:14550") -> None:
+    """Options of the bridge, shared with ``rovlab hmi --source mavlink``."""
+    p.add_argument("--connect", default=connect_default,
+                   help=f"pymavlink connection string to the vehicle (default {connect_default}: where ArduSub / "
+                        "BlueOS sends telemetry to a topside)")
+    p.add_argument("--vehicle", default="bluerov2_heavy", help="vehicle name or TOML file (default bluerov2_heavy)")
+    p.add_argument("--config", default="bluerov2_heavy",
+                   help="filter/controller configuration name or TOML file (default bluerov2_heavy)")
+    p.add_argument("--target-system", type=int, default=1, help="the vehicle's MAVLink system id (default 1)")
+    p.add_argument("--sysid", type=int, default=255,
+                   help="the bridge's MAVLink system id; must equal the vehicle's SYSID_MYGCS (default 255)")
+    p.add_argument("--command", choices=("manual_control", "rc_override"), default="manual_control",
+                   help="how to command ArduSub: MANUAL_CONTROL (default) or RC_CHANNELS_OVERRIDE")
+    p.add_argument("--command-hz", type=float, default=None, help="command rate [Hz] (default: the control rate)")
+    p.add_argument("--telemetry-timeout", type=float, default=0.5,
+                   help="seconds without telemetry before neutral commands are sent (default 0.5)")
+    p.add_argument("--arm", action="store_true", help="set MANUAL mode and arm the vehicle (disarm on exit)")
+    p.add_argument("--record", default=None, help="record telemetry and rovlab's messages to this MCAP file")
+
+
+def make_bridge(args: argparse.Namespace, log: Any) -> Any:
+    """A MavlinkBridge from the shared options (UserError for bad ones)."""
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.mavlink import MavlinkMissing
+    from rovlab.params.design import load_design_config
+    from rovlab.params.vehicle import load_vehicle
+
+    _check_connect(args.connect)
+    for name in ("target_system", "sysid"):
+        if not 1 <= getattr(args, name) <= 255:
+            raise UserError(f"--{name.replace('_', '-')} must be 1 .. 255, got {getattr(args, name)}")
+    vehicle = load_vehicle(args.vehicle)
+    config = load_design_config(args.config)
+    try:
+        from rovlab.interfaces.mavlink.bridge import MavlinkBridge
+
+        return MavlinkBridge(vehicle, config, connect=args.connect, target_system=args.target_system,
+                             sysid=args.sysid, command=args.command, command_hz=args.command_hz,
+                             telemetry_timeout_s=args.telemetry_timeout, arm=args.arm, record=args.record, log=log)
+    except MavlinkMissing as exc:
+        raise UserError(str(exc)) from None
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot open {args.connect} or {args.record}: {exc.strerror or exc}") from None
 
 
 def _check_connect(url: str) -> None:
@@ -175,4 +232,49 @@ def _cmd_convert(args: argparse.Namespace) -> int:
         raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     counts = ", ".join(f"{k} {v}" for k, v in summary["samples"].items())
     print(f"{args.log}: {summary['messages']} MAVLink messages -> {args.out}: {summary['rows']} rows ({counts})")
+    return 0
+
+
+def _cmd_bridge(args: argparse.Namespace) -> int:
+    import threading
+    import time
+
+    from rovlab.interfaces.cli import UserError
+
+    for name in ("depth", "heading_deg", "duration"):
+        v = getattr(args, name)
+        if v is not None and not math.isfinite(v):
+            raise UserError(f"--{name.replace('_', '-')} must be a finite number")
+    if args.depth is not None and args.depth < 0:
+        raise UserError(f"--depth must be >= 0 m (z is positive down), got {args.depth}")
+    if args.heading_deg is not None and args.depth is None:
+        raise UserError("--heading-deg needs --depth (the controller holds both)")
+    if args.duration is not None and not args.duration > 0:
+        raise UserError(f"--duration must be > 0 s, got {args.duration}")
+
+    def log(text: str) -> None:
+        print(f"rovlab mavlink bridge: {text}", file=sys.stderr, flush=True)
+
+    bridge = make_bridge(args, log)
+    if args.depth is not None:
+        bridge.set_reference(z=args.depth, psi=None if args.heading_deg is None else math.radians(args.heading_deg))
+    _stop_on_signals(bridge.stop)
+    print(f"rovlab mavlink bridge: {bridge.core.vehicle.name}/{bridge.core.config.name} on {args.connect} "
+          f"({'holding ' + format(args.depth, 'g') + ' m' if args.depth is not None else 'estimating only'}; "
+          "Ctrl-C stops)", flush=True)
+    thread = threading.Thread(target=bridge.run, kwargs={"duration_s": args.duration}, daemon=True)
+    thread.start()
+    next_print = time.monotonic() + args.status_every if args.status_every > 0 else math.inf
+    while thread.is_alive():
+        thread.join(0.2)
+        if time.monotonic() >= next_print and bridge.core.last is not None:
+            next_print += args.status_every
+            o = bridge.core.last
+            print(f"t={o.t:7.1f} s  z={o.x[0]:.3f} m  psi={math.degrees(o.x[1]):6.1f} deg  "
+                  f"tau_Z={o.tau[2]:6.2f} N  sensors={o.sensor_status}  "
+                  f"{'FAILSAFE ' if bridge.failsafe else ''}{'armed' if bridge.armed else 'disarmed'}", flush=True)
+    c = bridge.counts
+    print(f"rovlab mavlink bridge: stopped ({c['received']} messages in, {c['commands']} commands out, "
+          f"{c['failsafes']} telemetry failsafes)" + (f"; recording: {args.record}" if args.record else ""),
+          file=sys.stderr, flush=True)
     return 0
