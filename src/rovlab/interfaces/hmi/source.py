@@ -139,26 +139,32 @@ class SimulationSource:
 
     def loop_summary(self) -> dict[str, Any]:
         prep = self.sim.prep
-        fm = prep.filter_model
-        v, t = prep.vehicle, prep.truth
-        out: dict[str, Any] = {
-            "model": {**prep.config.model_values(v), "T_w": fm.T_w, "T_r": fm.T_r,
-                      "M_w": fm.params.M_w, "M_r": fm.params.M_r},
-            "vehicle": _vehicle_summary(v),
-            "truth": _vehicle_summary(t),
-            "W": _floats(np.diag(fm.W)[2:]),
-            "R": {c.name: c.variance for c in fm.channels},
-            "Q_diag": _floats(np.diag(fm.Q)),
-            "lqr_Q": _floats(prep.config.lqr_Q),
-            "lqr_R": _floats(prep.config.lqr_R),
-            "K": [_floats(row) for row in prep.K],
-            "P": [_floats(row) for row in prep.Pref],
-            "controller": _controller_name(prep),
-        }
-        summary = getattr(prep.design.controller.model, "summary", None)
-        if callable(summary):  # an adaptive controller's design (MRAC: reference model, gains, bounds)
-            out["mrac"] = summary()
-        return out
+        return design_summary(prep.design, truth=prep.truth, controller=_controller_name(prep))
+
+
+def design_summary(design: Any, *, truth: Vehicle, controller: str) -> dict[str, Any]:
+    """The parameters and gains of a running design (rovlab.sim.runner.Design), as the HMI shows
+    them: shared by the simulation and the vehicle bridges' sources."""
+    fm = design.estimator.model
+    v, config = design.vehicle, design.config
+    out: dict[str, Any] = {
+        "model": {**config.model_values(v), "T_w": fm.T_w, "T_r": fm.T_r,
+                  "M_w": fm.params.M_w, "M_r": fm.params.M_r},
+        "vehicle": _vehicle_summary(v),
+        "truth": _vehicle_summary(truth),
+        "W": _floats(np.diag(fm.W)[2:]),
+        "R": {c.name: c.variance for c in fm.channels},
+        "Q_diag": _floats(np.diag(fm.Q)),
+        "lqr_Q": _floats(config.lqr_Q),
+        "lqr_R": _floats(config.lqr_R),
+        "K": [_floats(row) for row in design.controller.model.K],
+        "P": [_floats(row) for row in design.controller.model.P],
+        "controller": controller,
+    }
+    summary = getattr(design.controller.model, "summary", None)
+    if callable(summary):  # an adaptive controller's design (MRAC: reference model, gains, bounds)
+        out["mrac"] = summary()
+    return out
 
 
 def _controller_name(prep: Any) -> str:

@@ -96,9 +96,10 @@ class MavlinkSource:
         self.bridge.core.apply(vehicle=vehicle, config=config)
 
     def loop_summary(self) -> dict[str, Any]:
-        core = self.bridge.core
-        return {"controller": core.controller_name, "estimator": core.estimator_name,
-                "vehicle": core.vehicle.name, "config": core.config.name, "h": self.h,
-                "bridge": {"connect": self.bridge.connect, "command": self.bridge.command,
-                           "command_hz": 1.0 / self.bridge.command_period,
-                           "telemetry_timeout_s": self.bridge.telemetry_timeout_s, **self.bridge.counts}}
+        from rovlab.interfaces.hmi.source import design_summary
+
+        core, br = self.bridge.core, self.bridge
+        out = design_summary(core.design, truth=core.vehicle, controller=core.controller_name)
+        out["bridge"] = {"connect": br.connect, "command": br.command, "command_hz": 1.0 / br.command_period,
+                         "telemetry_timeout_s": br.telemetry_timeout_s, **br.counts}
+        return out
