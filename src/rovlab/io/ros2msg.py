@@ -45,7 +45,27 @@ WRENCH_STAMPED_DEF = (
     + _SEP + _VECTOR3
 )
 
-DEFINITIONS = {ODOMETRY: ODOMETRY_DEF, WRENCH_STAMPED: WRENCH_STAMPED_DEF}
+FLUID_PRESSURE = "sensor_msgs/msg/FluidPressure"
+FLUID_PRESSURE_DEF = "std_msgs/Header header\nfloat64 fluid_pressure\nfloat64 variance\n" + _SEP + _HEADER + _SEP + _TIME
+
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+POSE_STAMPED_DEF = (
+    "std_msgs/Header header\ngeometry_msgs/Pose pose\n"
+    + _SEP + _HEADER + _SEP + _TIME
+    + _SEP + "MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n"
+    + _SEP + "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n"
+    + _SEP + "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
+)
+
+FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+FLOAT64_MULTI_ARRAY_DEF = (
+    "std_msgs/MultiArrayLayout layout\nfloat64[] data\n"
+    + _SEP + "MSG: std_msgs/MultiArrayLayout\nstd_msgs/MultiArrayDimension[] dim\nuint32 data_offset\n"
+    + _SEP + "MSG: std_msgs/MultiArrayDimension\nstring label\nuint32 size\nuint32 stride\n"
+)
+
+DEFINITIONS = {ODOMETRY: ODOMETRY_DEF, WRENCH_STAMPED: WRENCH_STAMPED_DEF, FLUID_PRESSURE: FLUID_PRESSURE_DEF,
+               POSE_STAMPED: POSE_STAMPED_DEF, FLOAT64_MULTI_ARRAY: FLOAT64_MULTI_ARRAY_DEF}
 
 
 def stamp(t_ns: int) -> dict[str, int]:

@@ -192,3 +192,52 @@ def read_mcap_json(path: str | Path, *, prefix: str = "/") -> Any:
             if channel.message_encoding != "json" or not channel.topic.startswith(prefix):
                 continue
             yield channel.topic, message.log_time / 1e9, json.loads(message.data)
+
+
+# JSON topic -> (field, column prefix) of the columns it carries (the inverse of rows_to_messages)
+_COLUMNS_OF = {
+    "/rovlab/truth": (("state", "true_"),),
+    "/rovlab/estimate": (("state", "est_"), ("variance", "var_")),
+    "/rovlab/measurement": (("values", "meas_"),),
+    "/rovlab/reference": (("state", "ref_"),),
+    "/rovlab/command": (("tau", "tau_"), ("pwm_us", "pwm_"), ("controller", "ctrl_")),
+}
+
+
+def read_mcap_columns(path: str | Path) -> dict[str, np.ndarray]:
+    """The numeric time-series columns (time_s, true_*, est_*, var_*, meas_*, ref_*, tau_*,
+    pwm_*, ctrl_*) of an MCAP log with rovlab's JSON topics -- written by :func:`write_mcap` or
+    recorded by the vehicle node -- one row per message time; NaN where a row has no value
+    (e.g. no sample of a sensor). ConfigError for a file that is not such a log."""
+    from rovlab.params.validate import ConfigError, Problem
+
+    try:
+        from mcap.reader import make_reader
+    except ImportError as exc:  # pragma: no cover - optional extra
+        raise RuntimeError("reading MCAP needs the 'mcap' package: pip install 'rovlab[log]'") from exc
+    rows: dict[float, dict[str, float]] = {}
+    names: dict[str, None] = {}
+    try:
+        with open(path, "rb") as fh:
+            for _schema, channel, message in make_reader(fh).iter_messages(topics=list(_COLUMNS_OF)):
+                if channel.message_encoding != "json":
+                    continue
+                msg = json.loads(message.data)
+                row = rows.setdefault(float(msg["t"]), {})
+                for field, prefix in _COLUMNS_OF[channel.topic]:
+                    for k, v in (msg.get(field) or {}).items():
+                        names[prefix + k] = None
+                        row[prefix + k] = float("nan") if v is None else float(v)
+    except FileNotFoundError:
+        raise ConfigError([Problem(str(path), "", "no such file", "an existing MCAP log")], "log") from None
+    except Exception as exc:  # the mcap reader raises its own errors for a damaged file
+        raise ConfigError([Problem(str(path), "", f"unreadable ({type(exc).__name__}: {exc})",
+                                   "an MCAP log with rovlab's JSON topics")], "log") from None
+    if not rows:
+        raise ConfigError([Problem(str(path), "", "no rovlab messages",
+                                   "an MCAP log with rovlab's topics (" + ", ".join(_COLUMNS_OF) + ")")], "log")
+    times = sorted(rows)
+    out: dict[str, np.ndarray] = {"time_s": np.array(times)}
+    for name in names:
+        out[name] = np.array([rows[t].get(name, np.nan) for t in times])
+    return out

@@ -129,8 +129,9 @@ class NodeOutput:
 
     def messages(self, *, outputs: tuple[str, ...] = ("X", "Y", "Z", "N")) -> list[tuple[str, float, dict[str, Any]]]:
         """The step as rovlab.io.messages (the topics the simulator publishes, without truth):
-        estimate, measurement, reference, command; channels named by their log columns as in the
-        simulator's messages. ``outputs``: the wrench entries the controller commands."""
+        estimate, measurement, reference, command; channels named by their log columns and the
+        command's ``tau`` holding the achieved wrench (X ...) and the demanded one (X_demanded ...),
+        as in the simulator's messages. ``outputs``: the wrench entries the controller commands."""
         t = self.t
         cols = self.channel_columns or self.channels
         status = dict(zip(cols, self.channel_status))
@@ -138,8 +139,9 @@ class NodeOutput:
                ("/rovlab/measurement", t, measurement_message(t, dict(zip(cols, self.y)))),
                ("/rovlab/reference", t, reference_message(t, {"z": self.reference[2], "psi": self.reference[3]})),
                ("/rovlab/command", t, command_message(
-                   t, {o: self.tau["XYZN".index(o)] for o in outputs}, dict(zip(self.thrusters, self.pwm_us)),
-                   self.controller_state))]
+                   t, {**{o: self.tau_achieved["XYZN".index(o)] for o in outputs},
+                       **{f"{o}_demanded": self.tau["XYZN".index(o)] for o in outputs}},
+                   dict(zip(self.thrusters, self.pwm_us)), self.controller_state))]
         return out
 
 

@@ -1,0 +1,370 @@
+"""What the ROS 2 and ROS 1 adapters share: topics, message contents, parameters. No ROS import.
+
+ROS 1 and ROS 2 messages of the same name have the same fields, so the adapters fill and read
+them through the functions below and differ only in how they create publishers, stamps and
+parameter services.
+
+Topics (relative to the namespace NS; remappable), REP-103/REP-105 frames (ENU ``map``/``odom``,
+FLU ``base_link``; rovlab.interfaces.node.frames converts):
+
+=====================  ==========================================  ===========================
+topic                  type                                        direction (node)
+=====================  ==========================================  ===========================
+pressure               sensor_msgs/FluidPressure [Pa]              in  (best effort)
+mocap/pose             geometry_msgs/PoseStamped (or ...WithCovar.) in  (best effort)
+imu                    sensor_msgs/Imu                             in  (best effort)
+setpoint               geometry_msgs/PoseStamped (depth, heading)  in  (reliable)
+odometry               nav_msgs/Odometry, covariance of the filter out (reliable)
+wrench                 geometry_msgs/WrenchStamped (demanded)      out (reliable)
+thrusters/pwm_us       std_msgs/Float64MultiArray (vehicle order)  out (reliable)
+diagnostics            diagnostic_msgs/DiagnosticArray             out (reliable)
+truth/odometry         nav_msgs/Odometry (simulated vehicle only)  sim out
+=====================  ==========================================  ===========================
+
+Pressure is turned into the sensor's depth as (p - p_surface) / (rho g), with rho and g from the
+vehicle file and p_surface the node parameter ``surface_pressure_pa`` (101325 Pa by default).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rovlab.interfaces.node import frames
+from rovlab.interfaces.node.core import NodeCore, NodeOutput
+
+TOPICS = {"pressure": "pressure", "mocap": "mocap/pose", "imu": "imu", "setpoint": "setpoint",
+          "odometry": "odometry", "wrench": "wrench", "pwm": "thrusters/pwm_us", "diagnostics": "diagnostics",
+          "truth": "truth/odometry"}
+WORLD_FRAME = "map"
+BODY_FRAME = "base_link"
+UNKNOWN_VARIANCE = 1e6  # on the diagonal of quantities the filter does not estimate (x, y, roll, pitch ...)
+SURFACE_PRESSURE_PA = 101325.0
+# where each TRUTH quantity sits in Odometry: (block, index) with block 0 = pose (x y z rx ry rz, NED
+# world axes before conversion), 1 = twist (vx vy vz wx wy wz, FRD body axes before conversion)
+_ODOM_SLOT = {"x": (0, 0), "y": (0, 1), "z": (0, 2), "psi": (0, 5), "u": (1, 0), "v": (1, 1), "w": (1, 2),
+              "r": (1, 5)}
+# diagnostic_msgs/DiagnosticStatus levels
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+
+
+class MessageError(ValueError):
+    """A message that cannot be used; the text names the topic and the field."""
+
+
+# --------------------------------------------------------------------------------------------
+# Outgoing
+# --------------------------------------------------------------------------------------------
+
+def odometry_content(out: NodeOutput | None = None, *, nav: Mapping[str, float] | None = None,
+                     P: np.ndarray | None = None, states: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Position (ENU), orientation quaternion (base_link in ENU), linear and angular velocity
+    (FLU) and the two 6x6 covariances (row-major lists of 36) of an estimate -- from a node output,
+    or from ``nav`` (TRUTH names -> values) with an optional covariance P over ``states``."""
+    if out is not None:
+        nav = {q: float(out.nav[i]) for i, q in enumerate(("x", "y", "z", "psi", "u", "v", "w", "r"))}
+        estimated = dict(zip(out.states, out.estimated))
+        P, states = out.P, tuple(estimated[s] for s in out.states)
+    assert nav is not None
+    pos = frames.ned_to_enu([nav.get("x", 0.0), nav.get("y", 0.0), nav.get("z", 0.0)])
+    quat = frames.heading_quaternion(nav.get("psi", 0.0))
+    lin = frames.frd_to_flu([nav.get("u", 0.0), nav.get("v", 0.0), nav.get("w", 0.0)])
+    ang = frames.frd_to_flu([0.0, 0.0, nav.get("r", 0.0)])
+    blocks = [np.diag(np.full(6, UNKNOWN_VARIANCE)), np.diag(np.full(6, UNKNOWN_VARIANCE))]
+    if P is not None:
+        slots = [(_ODOM_SLOT.get(q), i) for i, q in enumerate(states)]
+        for a, i in slots:
+            for b, j in slots:
+                if a is not None and b is not None and a[0] == b[0]:
+                    blocks[a[0]][a[1], b[1]] = P[i, j]
+    else:
+        for block in blocks:
+            block[:] = 0.0
+    pose_cov = frames.pose_covariance_to_enu(blocks[0])
+    twist_cov = frames.twist_covariance_to_flu(blocks[1])
+    return {"position": pos.tolist(), "orientation": list(quat), "linear": lin.tolist(), "angular": ang.tolist(),
+            "pose_covariance": pose_cov.ravel().tolist(), "twist_covariance": twist_cov.ravel().tolist()}
+
+
+def fill_odometry(msg: Any, content: Mapping[str, Any], *, frame: str = WORLD_FRAME, child: str = BODY_FRAME) -> Any:
+    """Fill a nav_msgs/Odometry (ROS 1 or 2) except its header stamp."""
+    msg.header.frame_id = frame
+    msg.child_frame_id = child
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    p.x, p.y, p.z = content["position"]
+    q.x, q.y, q.z, q.w = content["orientation"]
+    msg.pose.covariance = [float(v) for v in content["pose_covariance"]]
+    lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
+    lin.x, lin.y, lin.z = content["linear"]
+    ang.x, ang.y, ang.z = content["angular"]
+    msg.twist.covariance = [float(v) for v in content["twist_covariance"]]
+    return msg
+
+
+def wrench_flu(tau: np.ndarray) -> tuple[list[float], list[float]]:
+    """Force and torque in base_link (FLU) of rovlab's wrench [X, Y, Z, N] (FRD)."""
+    force = frames.frd_to_flu([tau[0], tau[1], tau[2]])
+    torque = frames.frd_to_flu([0.0, 0.0, tau[3]])
+    return force.tolist(), torque.tolist()
+
+
+def fill_wrench(msg: Any, tau: np.ndarray, *, frame: str = BODY_FRAME) -> Any:
+    msg.header.frame_id = frame
+    (fx, fy, fz), (tx, ty, tz) = wrench_flu(tau)
+    f, t = msg.wrench.force, msg.wrench.torque
+    f.x, f.y, f.z = fx, fy, fz
+    t.x, t.y, t.z = tx, ty, tz
+    return msg
+
+
+def fill_pwm(msg: Any, dim_cls: Any, out: NodeOutput) -> Any:
+    """std_msgs/Float64MultiArray: one PWM [us] per thruster, labelled by the thrusters' names."""
+    dim = dim_cls()
+    dim.label = ",".join(out.thrusters)
+    dim.size = len(out.thrusters)
+    dim.stride = len(out.thrusters)
+    msg.layout.dim = [dim]
+    msg.data = [float(v) for v in out.pwm_us]
+    return msg
+
+
+_LEVEL = {"ok": OK, "recovering": WARN, "off": WARN, "disabled": STALE}
+
+
+def diagnostics_content(out: NodeOutput, counters: Mapping[str, int], *, name: str = "rovlab",
+                        gains: Any = None) -> list[dict[str, Any]]:
+    """One DiagnosticStatus per sensor (level from its worst channel: ok -> OK, recovering or off
+    -> WARN, lost -> ERROR, switched off -> STALE), then one for the node: the sample counters and
+    the controller's gain matrix K (row-major, when it has one) so a tuning can be checked."""
+    statuses = []
+    for sensor, label in out.sensor_status.items():
+        values = {ch: st for ch, st in zip(out.channels, out.channel_status) if ch.split(".")[0] == sensor}
+        statuses.append({"level": _LEVEL.get(label, ERROR), "name": f"{name}/sensors/{sensor}", "message": label,
+                         "hardware_id": sensor, "values": values})
+    values = {k: str(v) for k, v in counters.items()}
+    if gains is not None:
+        values["K"] = " ".join(f"{v:.9g}" for v in np.asarray(gains, dtype=float).ravel())
+    statuses.append({"level": OK, "name": f"{name}/node", "message": "engaged" if out.engaged else "no set-point yet",
+                     "hardware_id": "", "values": values})
+    return statuses
+
+
+def fill_diagnostics(msg: Any, status_cls: Any, kv_cls: Any, content: list[dict[str, Any]]) -> Any:
+    out = []
+    for c in content:
+        s = status_cls()
+        s.level = bytes([c["level"]]) if isinstance(getattr(s, "level", b""), bytes) else c["level"]
+        s.name, s.message, s.hardware_id = c["name"], c["message"], c["hardware_id"]
+        vals = []
+        for k, v in c["values"].items():
+            kv = kv_cls()
+            kv.key, kv.value = str(k), str(v)
+            vals.append(kv)
+        s.values = vals
+        out.append(s)
+    msg.status = out
+    return msg
+
+
+# --------------------------------------------------------------------------------------------
+# Incoming (ValueError / MessageError naming the field for anything unusable)
+# --------------------------------------------------------------------------------------------
+
+def _finite(value: Any, where: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise MessageError(f"{where} = {value!r} is not a number") from None
+    if not math.isfinite(v):
+        raise MessageError(f"{where} = {v} is not finite")
+    return v
+
+
+def depth_from_pressure(pressure_pa: Any, *, rho: float, g: float, surface_pa: float = SURFACE_PRESSURE_PA) -> float:
+    """Depth of the pressure sensor [m] from its absolute pressure [Pa] (hydrostatics at the edge)."""
+    p = _finite(pressure_pa, "fluid_pressure")
+    if not 0.0 <= p < 1e8:
+        raise MessageError(f"fluid_pressure = {p} Pa is not a plausible absolute pressure")
+    return (p - surface_pa) / (rho * g)
+
+
+def pressure_from_depth(depth: float, *, rho: float, g: float, surface_pa: float = SURFACE_PRESSURE_PA) -> float:
+    return surface_pa + rho * g * depth
+
+
+def pose_samples(pose: Any, where: str = "pose") -> dict[str, float]:
+    """NED x, y, z and heading psi of a geometry_msgs/Pose of base_link in an ENU world."""
+    p, q = pose.position, pose.orientation
+    e = [_finite(p.x, f"{where}.position.x"), _finite(p.y, f"{where}.position.y"), _finite(p.z, f"{where}.position.z")]
+    quat = [_finite(getattr(q, a), f"{where}.orientation.{a}") for a in "xyzw"]
+    n = frames.enu_to_ned(e)
+    try:
+        psi = frames.quaternion_heading(quat)
+    except ValueError as exc:
+        raise MessageError(f"{where}.orientation: {exc}") from None
+    return {"x": float(n[0]), "y": float(n[1]), "z": float(n[2]), "psi": psi}
+
+
+def imu_samples(msg: Any) -> dict[str, float]:
+    """Heading psi (when the orientation is given, REP-145: covariance[0] != -1) and yaw rate r
+    (FRD) of a sensor_msgs/Imu in ENU / FLU."""
+    out: dict[str, float] = {}
+    cov = list(getattr(msg, "orientation_covariance", []) or [])
+    if not cov or cov[0] != -1.0:
+        q = msg.orientation
+        quat = [_finite(getattr(q, a), f"imu.orientation.{a}") for a in "xyzw"]
+        if any(quat):
+            try:
+                out["psi"] = frames.quaternion_heading(quat)
+            except ValueError as exc:
+                raise MessageError(f"imu.orientation: {exc}") from None
+    av = msg.angular_velocity
+    wz = _finite(av.z, "imu.angular_velocity.z")
+    out["r"] = float(frames.flu_to_frd([0.0, 0.0, wz])[2])
+    return out
+
+
+def stamp_seconds(sec: Any, nanosec: Any) -> float:
+    s = float(sec) + 1e-9 * float(nanosec)
+    if not math.isfinite(s) or s <= 0.0:
+        raise MessageError(f"header.stamp = {s} s is not a valid time")
+    return s
+
+
+def push_samples(core: NodeCore, sensor: str | None, samples: Mapping[str, float], stamp: float) -> list[str]:
+    """Offer a sensor's samples to the node; returns the results (see NodeCore.push)."""
+    if sensor is None:
+        return []
+    return [core.push(sensor, q, v, stamp) for q, v in samples.items()]
+
+
+# --------------------------------------------------------------------------------------------
+# Parameters: the configuration file's numbers, set through the file loader
+# --------------------------------------------------------------------------------------------
+
+_TUNABLE_TABLES = ("process_noise", "fusion", "lqr", "mrac", "model")
+
+
+def _numeric(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+class ParameterTable:
+    """The node's run-time parameters: the configuration file's numbers (process noise W, bias
+    time constants, measurement variances R, fusion settings, LQR weights, MRAC, model overrides)
+    and one on/off switch per sensor.
+
+    Names are the file's key paths (``process_noise.psd.w``, ``lqr.state_max.z``), a measurement's
+    variance is ``measurements.<sensor>.<quantity>.variance``, a sensor switch
+    ``sensors.<sensor>.enabled``. :meth:`set` validates a batch with the configuration loader
+    and redesigns (rovlab.params.design, NodeCore.apply): a refused batch changes nothing and
+    the reason names the parameter and what was expected.
+    """
+
+    def __init__(self, core: NodeCore, config_file: str | Path | None, data: Mapping[str, Any]) -> None:
+        self.core = core
+        self.file = str(config_file) if config_file is not None else None
+        self.base = copy.deepcopy(dict(data))
+        self.data = copy.deepcopy(dict(data))
+        self.edits: dict[str, Any] = {}  # key path (rovlab.params.edit syntax) -> value
+        self._path: dict[str, str] = {}
+        self.values: dict[str, Any] = {}
+        for table in _TUNABLE_TABLES:
+            if isinstance(self.data.get(table), Mapping):
+                self._walk(self.data[table], table)
+        for i, (m, c) in enumerate(zip(self.data.get("measurements", []), core.config.measurements)):
+            ch = next((x for x in core.channels if x.quantity == c.quantity and
+                       (x.sensor == c.sensor or (c.sensor is None and core.vehicle.sensor(x.sensor).kind == c.kind))),
+                      None)
+            if ch is None:
+                continue
+            name = f"measurements.{ch.sensor}.{ch.quantity}.variance"
+            variance = m.get("variance")
+            if variance is None:
+                variance = next(cc.variance for cc in core.design.estimator.channels if cc.name == ch.name)
+            self._path[name] = f"measurements[{i}].variance"
+            self.values[name] = float(variance)
+        for sensor in core.sensors:
+            self.values[f"sensors.{sensor}.enabled"] = True
+
+    def _walk(self, node: Mapping[str, Any], prefix: str) -> None:
+        for key, v in node.items():
+            name = f"{prefix}.{key}"
+            if isinstance(v, Mapping):
+                self._walk(v, name)
+            elif _numeric(v) or (isinstance(v, list) and v and all(_numeric(x) for x in v)):
+                self._path[name] = name
+                self.values[name] = [float(x) for x in v] if isinstance(v, list) else float(v)
+
+    def set(self, changes: Mapping[str, Any]) -> str | None:
+        """Apply a batch of parameter changes; None on success, else the reason (nothing changed)."""
+        from rovlab.params.design import design_config_from_dict
+        from rovlab.params.edit import apply_edits
+        from rovlab.params.validate import ConfigError
+
+        switches: dict[str, bool] = {}
+        edits: dict[str, Any] = {}
+        for name, value in changes.items():
+            if name.startswith("sensors.") and name.endswith(".enabled"):
+                sensor = name[len("sensors."):-len(".enabled")]
+                if sensor not in self.core.sensors:
+                    return f"{name}: unknown sensor {sensor!r} (the filter fuses {', '.join(self.core.sensors)})"
+                if not isinstance(value, bool):
+                    return f"{name} = {value!r}: expected true or false"
+                switches[sensor] = value
+                continue
+            if name not in self._path:
+                return f"{name}: not a parameter of this node"
+            old = self.values[name]
+            if isinstance(old, list):
+                if not (isinstance(value, (list, tuple)) and len(value) == len(old) and all(_numeric(x) for x in value)):
+                    return f"{name} = {value!r}: expected {len(old)} numbers"
+                value = [float(x) for x in value]
+                if not all(math.isfinite(x) for x in value):
+                    return f"{name} = {value!r}: expected finite numbers"
+            else:
+                if not _numeric(value) or not math.isfinite(float(value)):
+                    return f"{name} = {value!r}: expected a finite number"
+                value = float(value)
+            edits[self._path[name]] = value
+        if edits:
+            import tomlkit
+
+            doc = tomlkit.document()
+            for k, v in self.data.items():
+                doc[k] = v
+            try:
+                apply_edits(doc, edits, file=self.file or "<parameters>")
+                data = doc.unwrap()
+                config = design_config_from_dict(data, file=self.file or self.core.config.file or "<parameters>")
+                self.core.apply(config=config)
+            except (ConfigError, ValueError) as exc:
+                return str(exc)
+            self.data = data
+            self.edits.update(edits)
+        for sensor, on in switches.items():
+            self.core.set_sensor_enabled(sensor, on)
+        for name, value in changes.items():
+            self.values[name] = value if not isinstance(value, (int, float)) or isinstance(value, bool) else float(value)
+        return None
+
+    def save(self, path: str | Path) -> Path:
+        """Write the tuned configuration: the original file with the changed values (comments
+        kept), or the data as TOML when the node was started from a packaged name."""
+        from rovlab.params.edit import edit_toml_file
+
+        path = Path(path)
+        if self.file and Path(self.file).exists():
+            edit_toml_file(self.file, self.edits, output=path)
+        else:
+            import tomlkit
+
+            from rovlab.core.files import atomic_write_text
+
+            atomic_write_text(path, tomlkit.dumps(self.data))
+        return path

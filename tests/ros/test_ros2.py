@@ -1,0 +1,93 @@
+"""The ROS 2 vehicle node (issue 13) against independent rclpy peers, in a loopback-only network
+namespace: sensor data in, odometry with covariance and PWM out; run-time parameters; bad input;
+and `rovlab ros2 sim` + `rovlab ros2 node` holding depth and heading like case study 2."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from .conftest import HERE, ROS2_PY, require, require_netns, run_isolated
+
+
+@pytest.fixture()
+def ros2(tmp_path):
+    require(ROS2_PY.exists(), "the ROS 2 environment .venv-ros2 is missing (make ros2-env)")
+    require_netns()
+    return tmp_path
+
+
+def test_ros2_node_with_an_independent_peer(ros2):
+    r = run_isolated([str(ROS2_PY), str(HERE / "ros2_peer.py"), "peer", "--ns", "rov", "--logdir", str(ros2)],
+                     timeout=420, tmp=ros2)
+    assert r["service_up"]
+    # odometry at the control rate, REP-105 frames, the filter's covariance (ENU), unknowns marked
+    assert r["odometry_count"] >= 50
+    odom = r["odometry"]
+    assert (odom["frame"], odom["child"]) == ("map", "base_link")
+    pose_cov, twist_cov = np.array(odom["pose_cov"]).reshape(6, 6), np.array(odom["twist_cov"]).reshape(6, 6)
+    assert 0 < pose_cov[2, 2] < 1.0 and 0 < pose_cov[5, 5] < 1.0  # z and yaw estimated
+    assert pose_cov[0, 0] == pose_cov[1, 1] == 1e6  # x, y not estimated
+    assert 0 < twist_cov[2, 2] < 1e6 and 0 < twist_cov[5, 5] < 1e6
+    assert odom["z"] < 0  # below the surface: ENU z negative
+    # PWM per thruster, in the vehicle file's order
+    assert len(r["pwm"]) == 6 and r["pwm_label"] == "T1,T2,T3,T4,T5,T6"
+    assert all(1100 <= p <= 1900 for p in r["pwm"])
+    diag = r["diagnostics"]
+    assert set(diag) == {"rovlab/sensors/qualisys", "rovlab/sensors/pressure", "rovlab/node"}
+    assert diag["rovlab/node"][1] == "engaged"
+    # a NaN pressure and a zero quaternion are refused; the node keeps estimating
+    assert r["odometry_during_bad_input"] >= 15 and r["node_alive_after_bad_input"]
+    # parameters: validated by the configuration loader, refused with a reason; a good one redesigns
+    ok, reason = r["bad_param"]
+    assert not ok and "process_noise.psd.w" in reason and ">= 0" in reason
+    assert not r["bad_param_type"][0] and "finite number" in r["bad_param_type"][1]
+    assert r["good_param"] == [True, ""]
+    assert r["param_read_back"] == 10.0
+    assert r["gain_before"] and r["gain_after"] and r["gain_before"] != r["gain_after"]
+    assert r["sensor_off"] == [True, ""]
+    assert r["diag_after_sensor_off"]["rovlab/sensors/qualisys"] == "disabled"
+    assert r["node_alive_at_end"] and r["node_exit"] == 0  # SIGTERM: a clean exit
+    # the recording: ROS 2 channels and rovlab's JSON topics, replayable
+    from rovlab.io.timeseries import read_mcap_columns
+
+    cols = read_mcap_columns(ros2 / "node.mcap")
+    assert {"time_s", "est_z", "var_z", "meas_z_pressure", "tau_Z", "tau_N", "pwm_T1"} <= set(cols)
+    assert len(cols["time_s"]) >= 50
+
+
+def _wrap(a):
+    return np.remainder(np.asarray(a) + np.pi, 2 * np.pi) - np.pi
+
+
+def test_ros2_sim_and_node_hold_depth_and_heading_like_the_case_study(ros2):
+    """Case study 2 (Sandøy 2016, sec. 5.3.1; scenario step-process-model, 60 s) over ROS 2 in real
+    time: the tracking errors of the true depth and heading match the compiled simulator's."""
+    from rovlab.sim.runner import simulate
+
+    duration = 60.0
+    r = run_isolated([str(ROS2_PY), str(HERE / "ros2_peer.py"), "e2e", "--duration", str(duration + 1.0),
+                      "--logdir", str(ros2)], timeout=duration + 420, tmp=ros2)
+    assert r["node_started"] and r["node_exit"] == 0 and r["sim_exit"] == 0
+    truth = np.array(r["truth"])
+    refs = np.array(r["setpoints"])
+    assert len(truth) >= 0.9 * duration / 0.1
+    t0 = truth[0, 0]
+    truth = truth[truth[:, 0] <= t0 + duration + 1e-6]
+    idx = np.searchsorted(refs[:, 0], truth[:, 0], side="right") - 1
+    assert np.all(idx >= 0)
+    ez = truth[:, 1] - refs[idx, 1]
+    epsi = _wrap(truth[:, 2] - refs[idx, 2])  # ENU yaw error = -(heading error): same RMS
+    c = simulate("step-process-model").columns
+    bz, bpsi = c["true_z"] - c["ref_z"], _wrap(c["true_psi"] - c["ref_psi"])
+
+    def rms(a):
+        return float(math.sqrt(np.mean(np.square(a))))
+
+    print(f"\nROS 2 sim+node, 60 s: depth RMS {rms(ez):.4f} m (simulator {rms(bz):.4f}), heading RMS "
+          f"{rms(epsi):.4f} rad (simulator {rms(bpsi):.4f}); last 10 s: {rms(ez[-100:]):.4f} m, {rms(epsi[-100:]):.4f} rad")
+    assert rms(ez) == pytest.approx(rms(bz), rel=0.25)
+    assert rms(epsi) == pytest.approx(rms(bpsi), rel=0.25)
+    assert rms(ez[-100:]) < 0.02 and rms(epsi[-100:]) < max(2 * rms(bpsi[-100:]), 0.02)
