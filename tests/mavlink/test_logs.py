@@ -145,3 +145,21 @@ def test_sim_dive_replays_through_rovlab_filter(tmp_path, capsys):
     est2 = _read_csv(out2)
     last = [(f["press_abs"] - 1013.25) * 100.0 / (1000.0 * 9.82) for _, k, f in records if k == "SCALED_PRESSURE2"][-5:]
     assert est2["est_z"][-1] == pytest.approx(np.mean(last), abs=0.05)
+
+
+def test_filter_reads_an_mcap_with_rovlabs_topics(tmp_path):
+    """An MCAP without MAVLink telemetry (a simulation's log, or a vehicle node's recording) is read
+    from its rovlab topics (measurements and achieved wrench) instead."""
+    pytest.importorskip("mcap")
+    from rovlab.io.timeseries import write_mcap
+    from rovlab.sim.runner import simulate
+
+    res = simulate("step-process-model")
+    n = 200  # 20 s
+    cols = {k: np.asarray(v)[:n] for k, v in res.columns.items() if not k.startswith("status_")}
+    write_mcap(tmp_path / "sim.mcap", cols, start_time_s=0.0)
+    out = tmp_path / "est.csv"
+    assert main(["filter", str(tmp_path / "sim.mcap"), "--config", "default", "--out", str(out)]) == 0
+    est = _read_csv(out)
+    assert est["time_s"].size == n
+    assert est["est_z"][-1] == pytest.approx(cols["true_z"][-1], abs=0.05)

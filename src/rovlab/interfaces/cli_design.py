@@ -164,12 +164,35 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     vehicle, config, model = _load(args)
     _check_initial(config, model)
     with tempfile.TemporaryDirectory(prefix="rovlab-filter-") as tmp:
-        log = _mavlink_as_csv(args.log, vehicle, model, Path(tmp)) if _is_mavlink_log(args.log) else args.log
-        return _filter(args, vehicle, config, model, log)
+        return _filter(args, vehicle, config, model, _as_csv(args.log, vehicle, model, Path(tmp)))
 
 
-def _is_mavlink_log(path: str) -> bool:
-    return Path(path).suffix.lower() in (".tlog", ".mcap")
+def _as_csv(log: str, vehicle, model, folder: Path) -> str:
+    """The log as a CSV the filter reads: a CSV as it is; a MAVLink dive (.tlog, or an .mcap with
+    /mavlink/ topics) converted from its telemetry; another .mcap (rovlab's topics: a simulation
+    or a vehicle node's recording) from its measurement and command columns."""
+    from rovlab.interfaces.cli import UserError
+
+    suffix = Path(log).suffix.lower()
+    if suffix == ".tlog":
+        return _mavlink_as_csv(log, vehicle, model, folder)
+    if suffix != ".mcap":
+        return log
+    try:
+        from rovlab.io.timeseries import mcap_topics, read_mcap_columns
+
+        topics = mcap_topics(log)
+    except (ImportError, RuntimeError):
+        raise UserError("reading MCAP needs the 'mcap' package: pip install 'rovlab[log]'") from None
+    except OSError as exc:
+        raise UserError(f"cannot read {log}: {exc.strerror or exc}") from None
+    if any(t.startswith("/mavlink/") for t in topics):
+        return _mavlink_as_csv(log, vehicle, model, folder)
+    from rovlab.io.logs import write_csv
+
+    out = folder / (Path(log).stem + ".csv")
+    write_csv(out, read_mcap_columns(log), exact=("time_s",))
+    return str(out)
 
 
 def _mavlink_as_csv(log: str, vehicle, model, folder: Path) -> str:

@@ -167,6 +167,27 @@ def _json_default(value: Any) -> Any:
     return str(value)
 
 
+def mcap_topics(path: str | Path) -> set[str]:
+    """The topics of an MCAP file (from its summary, or by reading it through if it has none)."""
+    from mcap.reader import NonSeekingReader, make_reader
+
+    with open(path, "rb") as fh:
+        try:
+            summary = make_reader(fh).get_summary()
+        except Exception:  # noqa: BLE001 - no usable summary: read it through
+            summary = None
+        if summary is not None:
+            return {c.topic for c in summary.channels.values()}
+        fh.seek(0)
+        topics: set[str] = set()
+        try:
+            for _schema, channel, _message in NonSeekingReader(fh).iter_messages():
+                topics.add(channel.topic)
+        except Exception:  # noqa: BLE001 - the cut-off end of a recording
+            pass
+        return topics
+
+
 def read_mcap_json(path: str | Path, *, prefix: str = "/") -> Any:
     """(topic, UNIX time [s], message dict) of the JSON messages on topics starting with prefix,
     in log-time order. Requires `mcap`."""
