@@ -78,7 +78,7 @@ def test_a_misbehaving_vehicle_does_not_stop_the_bridge():
     assert not thread.is_alive()
 
 
-def test_rc_overrides_move_the_thrusters():
+def test_rc_overrides_move_the_thrusters_and_a_disarmed_vehicle_stays_disarmed():
     port = free_udp_port()
     lines: list[str] = []
     bridge = _bridge(port, lines, arm=True, command="rc_override")
@@ -92,6 +92,11 @@ def test_rc_overrides_move_the_thrusters():
             f"vertical thrusters did not push down: {bridge.servo_pwm}"
         last = bridge.sent[-1][1]
         assert len(last) == 8 and last[2] < 1500 and last[0] == 65535  # channel 3 (throttle) down; 1 untouched
+        # a pilot disarms the vehicle: the bridge (armed once) must not arm it again
+        bridge.conn.mav.command_long_send(1, 1, 400, 0, 0, 0, 0, 0, 0, 0, 0)
+        assert _wait(lambda: not bridge.armed, 5.0)
+        time.sleep(2.5)
+        assert not bridge.armed and any("disarmed" in line for line in lines)
     finally:
         bridge.stop()
         thread.join(10.0)

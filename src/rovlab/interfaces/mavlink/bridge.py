@@ -13,10 +13,12 @@ all the estimation and control; this module only translates:
   or as RC_CHANNELS_OVERRIDE pulses on channels 3-6.
 
 Safety, as the issue asks: the bridge sends its own HEARTBEAT (1 Hz, as a ground station);
+it sends MANUAL_CONTROL only once the vehicle reported its joystick gains (or 5 s passed);
 commands go out at a fixed rate (``command_hz``) and their change per second is limited
 (``max_input_rate``); with no telemetry for ``telemetry_timeout_s`` (default 0.5 s) it sends
 neutral commands (no slew limit on the way to neutral); with ``arm`` it puts the vehicle in
-MANUAL and arms it, and on close it sends neutral and disarms what it armed. The controller is
+MANUAL and arms it -- once: a vehicle disarmed afterwards (by a pilot or a failsafe) stays
+disarmed -- and on close it sends neutral and disarms what it armed. The controller is
 engaged only once a reference is set (CLI ``--depth``/``--heading-deg`` or the HMI); before that
 nothing is commanded and a pilot can fly the vehicle as usual.
 """
@@ -88,8 +90,10 @@ class MavlinkBridge:
         self.recorder = TelemetryRecorder(record, metadata={"connect": connect, "vehicle": vehicle.name,
                                                             "config": config.name}) if record else None
         # what we know of the vehicle
-        self.params: dict[str, float] = {"JS_GAIN_DEFAULT": 0.5, "JS_THR_GAIN": 1.0}
+        self.params: dict[str, float] = {"JS_GAIN_DEFAULT": 0.5, "JS_THR_GAIN": 1.0}  # ArduSub's defaults
+        self.confirmed: set[str] = set()  # parameters the vehicle has reported
         self.vehicle_seen = False
+        self._first_seen: float | None = None
         self.armed = False
         self.mode: int | None = None
         self.last_telemetry: float | None = None
@@ -184,7 +188,7 @@ class MavlinkBridge:
                 for topic, _t, m in msgs:
                     self.recorder.rovlab(topic, wall, m)
         self._housekeeping(now)
-        if self.core.engaged and self.vehicle_seen and now >= self._due["command"]:
+        if self.core.engaged and self.vehicle_seen and now >= self._due["command"] and self._gains_known(now):
             self._due["command"] = max(self._due["command"] + self.command_period, now)
             self._command(now)
 
@@ -204,8 +208,14 @@ class MavlinkBridge:
                 return
             if not self.vehicle_seen:
                 self.log(f"vehicle {self.target_system} seen (ArduSub mode {msg.custom_mode})")
+                self._first_seen = now
             self.vehicle_seen = True
-            self.armed = bool(msg.base_mode & self.mav.MAV_MODE_FLAG_SAFETY_ARMED)
+            armed = bool(msg.base_mode & self.mav.MAV_MODE_FLAG_SAFETY_ARMED)
+            if armed and self.want_arm:
+                self.want_arm = False  # armed once: never re-arm a vehicle that a pilot or a failsafe disarmed
+            if self.armed and not armed:
+                self.log("the vehicle is disarmed")
+            self.armed = armed
             self.mode = int(msg.custom_mode)
             self.last_telemetry = now
             return
@@ -232,6 +242,7 @@ class MavlinkBridge:
         if name not in _PARAMS_WANTED or not math.isfinite(msg.param_value):
             return
         self.params[name] = float(msg.param_value)
+        self.confirmed.add(name)
         if name == "BARO2_GND_PRESS" and msg.param_value > 0:
             self.smap.surface_hpa = float(msg.param_value) / 100.0
         if name == "SYSID_MYGCS" and int(msg.param_value) != self.sysid:
@@ -247,10 +258,10 @@ class MavlinkBridge:
             out.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE)
         if not self.vehicle_seen:
             return
-        if now >= self._due["params"] and any(p not in self.params for p in _PARAMS_WANTED):
+        if now >= self._due["params"] and any(p not in self.confirmed for p in _PARAMS_WANTED):
             self._due["params"] = now + 1.0
             for name in _PARAMS_WANTED:
-                if name not in self.params or name in ("JS_GAIN_DEFAULT", "JS_THR_GAIN"):
+                if name not in self.confirmed:
                     out.param_request_read_send(self.target_system, 1, name.encode(), -1)
         if not self._streams_asked:
             self._streams_asked = True  # ask once for the telemetry at the control rate (ArduSub honours it)
@@ -266,6 +277,17 @@ class MavlinkBridge:
                 out.command_long_send(self.target_system, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0,
                                       0, 0)
                 self._armed_by_us = True
+
+    def _gains_known(self, now: float) -> bool:
+        """MANUAL_CONTROL is scaled by the vehicle's joystick gains: wait for them (5 s at most, then
+        ArduSub's defaults, said once). RC overrides do not depend on them."""
+        if self.command != "manual_control" or {"JS_GAIN_DEFAULT", "JS_THR_GAIN"} <= self.confirmed:
+            return True
+        if self._first_seen is not None and now - self._first_seen > 5.0:
+            self._warn_once("gains", "the vehicle did not report JS_GAIN_DEFAULT / JS_THR_GAIN: assuming "
+                                     f"{self.params['JS_GAIN_DEFAULT']:g} / {self.params['JS_THR_GAIN']:g}")
+            return True
+        return False
 
     def telemetry_lost(self, now: float) -> bool:
         return self.last_telemetry is None or now - self.last_telemetry > self.telemetry_timeout_s
