@@ -136,3 +136,26 @@ def test_unsupported_mode_is_refused(vehicle):
     assert next(m for m in gcs.messages("COMMAND_ACK") if m.command == 176).result == 2  # DENIED
     gcs.conn.mav.command_long_send(1, 1, 176, 0, 1, 0, 0, 0, 0, 0, 0)  # STABILIZE
     gcs.wait_for(lambda: gcs.latest["HEARTBEAT"].custom_mode == 0, 3.0, what="STABILIZE in HEARTBEAT")
+
+
+def test_what_ground_stations_ask_at_connect(vehicle):
+    gcs, _ = vehicle
+    gcs.seen.clear()
+    gcs.conn.mav.command_long_send(1, 1, 512, 0, 148, 0, 0, 0, 0, 0, 0)  # REQUEST_MESSAGE AUTOPILOT_VERSION
+    gcs.conn.mav.mission_request_list_send(1, 1)
+    gcs.wait_for(lambda: gcs.messages("AUTOPILOT_VERSION") and gcs.messages("MISSION_COUNT"), 5.0,
+                 what="AUTOPILOT_VERSION and MISSION_COUNT")
+    assert gcs.messages("AUTOPILOT_VERSION")[0].capabilities & 8192  # MAVLink 2
+    assert gcs.messages("MISSION_COUNT")[0].count == 0
+    # message rates: ATTITUDE at 5 Hz, then back to the default; an unknown stream is refused
+    gcs.conn.mav.command_long_send(1, 1, 511, 0, 30, 200_000, 0, 0, 0, 0, 0)
+    gcs.conn.mav.command_long_send(1, 1, 511, 0, 9999, 200_000, 0, 0, 0, 0, 0)
+    gcs.wait_for(lambda: len([m for m in gcs.messages("COMMAND_ACK") if m.command == 511]) >= 2, 5.0,
+                 what="SET_MESSAGE_INTERVAL ACKs")
+    assert [m.result for m in gcs.messages("COMMAND_ACK") if m.command == 511] == [0, 2]
+    gcs.pump(0.5)
+    gcs.seen.clear()
+    gcs.pump(2.0)
+    n = len(gcs.messages("ATTITUDE"))
+    assert 6 <= n <= 14, f"{n} ATTITUDE messages in 2 s at 5 Hz"
+    gcs.conn.mav.command_long_send(1, 1, 511, 0, 30, 0, 0, 0, 0, 0, 0)  # default again

@@ -11,6 +11,8 @@ What it does, as a stock BlueROV2 running ArduSub would (docs/mavlink.md has the
 * arms and disarms on COMMAND_LONG MAV_CMD_COMPONENT_ARM_DISARM and changes mode on
   MAV_CMD_DO_SET_MODE or SET_MODE, each answered by COMMAND_ACK; MANUAL and STABILIZE are
   simulated (identical here: roll and pitch are not modelled), other modes are refused;
+  MAV_CMD_SET_MESSAGE_INTERVAL sets the rate of a streamed message; AUTOPILOT_VERSION is sent on
+  request and a mission list request gets an empty list (what ground stations ask at connect);
 * answers the parameter protocol (PARAM_REQUEST_LIST, PARAM_REQUEST_READ, PARAM_SET ->
   PARAM_VALUE) for the parameters of rovlab.interfaces.mavlink.ardusub.SIM_PARAMETERS;
 * obeys MANUAL_CONTROL and RC_CHANNELS_OVERRIDE only from SYSID_MYGCS (as ArduSub does), turns
@@ -99,6 +101,7 @@ class ArduSubSim:
         rate = pressure.rate_hz if pressure is not None else 10.0
         self._periods = {"heartbeat": 1.0, "attitude": 1.0 / attitude_hz, "pressure": 1.0 / rate,
                          "sys_status": 1.0, "servo": 0.1, "vfr_hud": 0.2, "local_position": 0.1}
+        self._default_periods = dict(self._periods)
         self._due = dict.fromkeys(self._periods, 0.0)
         self._warned: set[str] = set()
 
@@ -204,11 +207,42 @@ class ArduSubSim:
             return
         mav = self.mav
         result = mav.MAV_RESULT_UNSUPPORTED
+        send_version = False
         if msg.command == mav.MAV_CMD_COMPONENT_ARM_DISARM:
             result = self._arm(msg.param1, now)
         elif msg.command == mav.MAV_CMD_DO_SET_MODE:
             result = self._set_mode(msg.param2)
+        elif msg.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
+            result = self._set_interval(msg.param1, msg.param2)
+        elif msg.command in (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            wanted = msg.param1 if msg.command == mav.MAV_CMD_REQUEST_MESSAGE else mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            send_version = wanted == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            result = mav.MAV_RESULT_ACCEPTED if send_version else mav.MAV_RESULT_UNSUPPORTED
         self.conn.mav.command_ack_send(msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
+        if send_version:
+            caps = mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+            self.conn.mav.autopilot_version_send(caps, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
+
+    def _set_interval(self, msg_id: float, interval_us: float) -> int:
+        """MAV_CMD_SET_MESSAGE_INTERVAL for the streamed messages: interval in us, 0 = default,
+        -1 = off (limited to 1 .. 100 Hz)."""
+        key = _STREAM_KEYS.get(int(msg_id)) if math.isfinite(msg_id) else None
+        if key is None or not math.isfinite(interval_us):
+            self.counts["refused"] += 1
+            return self.mav.MAV_RESULT_DENIED
+        if interval_us < 0:
+            self._periods[key] = math.inf
+        elif interval_us == 0:
+            self._periods[key] = self._default_periods[key]
+        else:
+            self._periods[key] = min(max(interval_us * 1e-6, 0.01), 1.0)
+        self._due[key] = 0.0
+        return self.mav.MAV_RESULT_ACCEPTED
+
+    def _on_mission_request_list(self, msg: Any, now: float) -> None:
+        if msg.target_system in (0, self.sysid):  # no missions in the simulator: an empty list
+            self.conn.mav.mission_count_send(msg.get_srcSystem(), msg.get_srcComponent(), 0,
+                                             getattr(msg, "mission_type", 0))
 
     def _arm(self, param1: float, now: float) -> int:
         mav = self.mav
@@ -311,7 +345,7 @@ class ArduSubSim:
     def _telemetry(self, now: float) -> None:
         due = [k for k, t in self._due.items() if now >= t]
         for key in due:
-            self._due[key] = max(self._due[key] + self._periods[key], now)
+            self._due[key] = max(self._due[key] + self._periods[key], now)  # inf: the stream is off
         if not due:
             return
         mav, out = self.mav, self.conn.mav
@@ -364,4 +398,9 @@ _HANDLERS: dict[str, Callable[[ArduSubSim, Any, float], None]] = {
     "PARAM_REQUEST_LIST": ArduSubSim._on_param_request_list,
     "PARAM_REQUEST_READ": ArduSubSim._on_param_request_read,
     "PARAM_SET": ArduSubSim._on_param_set,
+    "MISSION_REQUEST_LIST": ArduSubSim._on_mission_request_list,
 }
+
+# MAVLink message id -> telemetry stream (for MAV_CMD_SET_MESSAGE_INTERVAL)
+_STREAM_KEYS = {0: "heartbeat", 30: "attitude", 137: "pressure", 1: "sys_status", 36: "servo", 74: "vfr_hud",
+                32: "local_position"}
