@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml
 $(ROS2_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV_ROS2)
 	$(VENV_ROS2)/bin/pip install --quiet --upgrade pip
-	$(VENV_ROS2)/bin/pip install --quiet -e '.[ros2,log]'
+	$(VENV_ROS2)/bin/pip install --quiet -e '.[ros2,log,hmi]'
 	touch $(ROS2_STAMP)
 
 ros2-env: $(ROS2_STAMP)

@@ -62,3 +62,36 @@ def run_isolated(argv: list[str], *, timeout: float, tmp: Path) -> dict:
             return json.loads(line[len("RESULT "):])
     logs = "".join(f"\n--- {p.name}\n{p.read_text()[-3000:]}" for p in sorted(tmp.glob("*.log")))
     raise AssertionError(f"no result from {argv[1:]} (exit {proc.returncode}):\n{out[-5000:]}{logs}")
+
+
+def tracking_rms(result: dict, duration: float) -> dict[str, float]:
+    """RMS of the true depth and heading errors over the first ``duration`` seconds of a run
+    observed over ROS (truth rows and set-points as (stamp, depth, ENU yaw)), next to the
+    compiled simulator's on the same scenario (step-process-model)."""
+    import math
+
+    import numpy as np
+
+    from rovlab.sim.runner import simulate
+
+    def wrap(a):
+        return np.remainder(np.asarray(a) + np.pi, 2 * np.pi) - np.pi
+
+    def rms(a):
+        return float(math.sqrt(np.mean(np.square(a))))
+
+    from rovlab.sim.scenario import load_scenario
+
+    sc = load_scenario("step-process-model")
+    truth = np.array(result["truth"])
+    t0 = truth[0, 0]  # the simulated vehicle stamps step k at t0 + k h
+    assert abs(truth[0, 1] - sc.initial[2]) < 1e-9, "the first step (the initial state) was not received"
+    truth = truth[truth[:, 0] <= t0 + duration + 1e-6]
+    refs = np.array([sc.reference_at(t - t0) for t in truth[:, 0]])  # the schedule it published
+    ez = truth[:, 1] - refs[:, 0]
+    epsi = wrap(truth[:, 2] - (0.5 * np.pi - refs[:, 1]))  # ENU yaw error = -(heading error): the same RMS
+    c = simulate("step-process-model").columns
+    bz, bpsi = c["true_z"] - c["ref_z"], wrap(c["true_psi"] - c["ref_psi"])
+    return {"rows": len(truth), "z": rms(ez), "psi": rms(epsi), "z_sim": rms(bz), "psi_sim": rms(bpsi),
+            "z_last10": rms(ez[-100:]), "psi_last10": rms(epsi[-100:]), "z_sim_last10": rms(bz[-100:]),
+            "psi_sim_last10": rms(bpsi[-100:])}

@@ -81,14 +81,30 @@ def set_param(node, client, name: str, value, kind: int) -> tuple[bool, str]:
     return bool(r.successful), r.reason
 
 
+WARM = """
+from rovlab.interfaces.node.runtime import load_node, load_sim
+core, _ = load_node("udrone", "thesis")
+sim = load_sim("step-process-model")
+sim.step(); sim.step()
+"""
+
+
+def warm_up() -> None:
+    """Compile (or load from the cache) the node's and the simulated vehicle's kernels before any
+    clock starts: after a change of rovlab's sources the first process compiles for minutes."""
+    subprocess.run([sys.executable, "-c", WARM], check=True, timeout=1200, capture_output=True)
+
+
 def peer(ns: str, logdir: str) -> dict:
     out: dict = {}
+    warm_up()
     proc = start(["ros2", "node", "--vehicle", "udrone", "--config", "thesis", "--namespace", ns,
-                  "--record", os.path.join(logdir, "node.mcap")], os.path.join(logdir, "node.log"))
+                  "--record", os.path.join(logdir, "node.mcap"), "--remap", f"pressure:=/{ns}/depth/pressure"],
+                 os.path.join(logdir, "node.log"))
     rclpy.init()
     node = rclpy.create_node("rovlab_test_peer")
     try:
-        pub_p = node.create_publisher(FluidPressure, f"/{ns}/pressure", qos_profile_sensor_data)
+        pub_p = node.create_publisher(FluidPressure, f"/{ns}/depth/pressure", qos_profile_sensor_data)  # remapped
         pub_m = node.create_publisher(PoseStamped, f"/{ns}/mocap/pose", qos_profile_sensor_data)
         pub_s = node.create_publisher(PoseStamped, f"/{ns}/setpoint", RELIABLE)
         got: dict[str, list] = {"odom": [], "pwm": [], "wrench": [], "diag": []}
@@ -98,7 +114,7 @@ def peer(ns: str, logdir: str) -> dict:
         node.create_subscription(DiagnosticArray, f"/{ns}/diagnostics", lambda m: got["diag"].append(m), RELIABLE)
         setc = node.create_client(SetParameters, f"/{ns}/rovlab_node/set_parameters")
         getc = node.create_client(GetParameters, f"/{ns}/rovlab_node/get_parameters")
-        out["service_up"] = setc.wait_for_service(timeout_sec=120.0)
+        out["service_up"] = setc.wait_for_service(timeout_sec=60.0)
         state = {"z": 1.0, "yaw": 0.3, "bad": None}
         rng = random.Random(1)  # sensor noise: a sensor repeating one value is declared stuck
 
@@ -193,13 +209,13 @@ def peer(ns: str, logdir: str) -> dict:
 
 def e2e(duration: float, logdir: str, scenario: str) -> dict:
     out: dict = {}
-    sim = start(["ros2", "sim", "--scenario", scenario], os.path.join(logdir, "sim.log"))
-    nodep = start(["ros2", "node", "--vehicle", "udrone", "--config", "thesis"], os.path.join(logdir, "node.log"))
+    warm_up()
     rclpy.init()
     node = rclpy.create_node("rovlab_test_observer")
     rows: list[tuple[float, float, float]] = []
     refs: list[tuple[float, float, float]] = []
     est: list[tuple[float, float]] = []
+    sim = nodep = None
     try:
         node.create_subscription(Odometry, "/truth/odometry", lambda m: rows.append(
             (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, -m.pose.pose.position.z,
@@ -209,15 +225,17 @@ def e2e(duration: float, logdir: str, scenario: str) -> dict:
              2 * math.atan2(m.pose.orientation.z, m.pose.orientation.w))), RELIABLE)
         node.create_subscription(Odometry, "/odometry", lambda m: est.append(
             (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, -m.pose.pose.position.z)), RELIABLE)
-        # the simulated vehicle starts at once; the node may need longer (compiling on a fresh machine)
-        spin_until(node, lambda: len(est) > 0, 300.0)
+        spin_until(node, lambda: False, 1.0)  # subscribed before the simulated vehicle publishes its first step
+        sim = start(["ros2", "sim", "--scenario", scenario], os.path.join(logdir, "sim.log"))
+        nodep = start(["ros2", "node", "--vehicle", "udrone", "--config", "thesis"], os.path.join(logdir, "node.log"))
+        spin_until(node, lambda: len(est) > 0, 60.0)
         out["node_started"] = bool(est)
         spin_until(node, lambda: False, duration)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-        out["node_exit"] = stop(nodep)
-        out["sim_exit"] = stop(sim)
+        out["node_exit"] = stop(nodep) if nodep else None
+        out["sim_exit"] = stop(sim) if sim else None
     out["truth"] = rows
     out["setpoints"] = refs
     out["estimates"] = len(est)
@@ -226,14 +244,98 @@ def e2e(duration: float, logdir: str, scenario: str) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("mode", choices=("peer", "e2e"))
+    ap.add_argument("mode", choices=("peer", "e2e", "hmi"))
     ap.add_argument("--ns", default="rov")
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--scenario", default="step-process-model")
     ap.add_argument("--logdir", default=".")
     a = ap.parse_args()
-    res = peer(a.ns, a.logdir) if a.mode == "peer" else e2e(a.duration, a.logdir, a.scenario)
+    if a.mode == "peer":
+        res = peer(a.ns, a.logdir)
+    elif a.mode == "hmi":
+        res = hmi(a.ns, a.logdir)
+    else:
+        res = e2e(a.duration, a.logdir, a.scenario)
     print("RESULT " + json.dumps(res))
+
+
+def hmi(ns: str, logdir: str) -> dict:
+    """The HMI's ROS 2 source against a running node: messages in, commands and tuning out."""
+    from rovlab.interfaces.node.ros2_source import Ros2Source, hmi_documents
+    from rovlab.params.validate import ConfigError
+
+    out: dict = {}
+    warm_up()
+    proc = start(["ros2", "node", "--vehicle", "udrone", "--config", "thesis", "--namespace", ns],
+                 os.path.join(logdir, "node.log"))
+    docs, stash = hmi_documents("udrone", "thesis")
+    src = Ros2Source(vehicle=docs["vehicle"].value, config=docs["config"].value, config_data=docs["config"].data,
+                     stash=stash, namespace=ns)
+    rclpy.init()
+    node = rclpy.create_node("rovlab_test_sensors")
+    try:
+        pub_p = node.create_publisher(FluidPressure, f"/{ns}/pressure", qos_profile_sensor_data)
+        pub_m = node.create_publisher(PoseStamped, f"/{ns}/mocap/pose", qos_profile_sensor_data)
+        rng = random.Random(2)
+        messages: list = []
+
+        def run(seconds: float) -> None:
+            end = time.monotonic() + seconds
+            nxt = time.monotonic()
+            while time.monotonic() < end:
+                if time.monotonic() >= nxt:
+                    t = node.get_clock().now().nanoseconds * 1e-9
+                    p = FluidPressure()
+                    stamp(p, t)
+                    p.fluid_pressure = 101325.0 + 9810.0 * (1.0 - 0.0465 + rng.gauss(0, 0.01))
+                    pub_p.publish(p)
+                    m = PoseStamped()
+                    stamp(m, t)
+                    m.pose.position.z = -1.0 + rng.gauss(0, 4e-5)
+                    m.pose.orientation.w = 1.0
+                    m.pose.orientation.z = rng.gauss(0, 1e-3)
+                    pub_m.publish(m)
+                    nxt += 0.1
+                rclpy.spin_once(node, timeout_sec=0.01)
+                messages.extend(src.advance(1))
+
+        run(4.0)
+        src.set_reference(z=1.2, psi=0.0)
+        run(2.0)
+        out["describe"] = src.describe()
+        out["topics"] = sorted({m[0] for m in messages})
+        est = [m for m in messages if m[0] == "/rovlab/estimate"]
+        out["estimate"] = est[-1][2] if est else None
+        ref = [m for m in messages if m[0] == "/rovlab/reference"]
+        out["reference"] = ref[-1][2] if ref else None
+        cmd = [m for m in messages if m[0] == "/rovlab/command"]
+        out["command"] = cmd[-1][2] if cmd else None
+        k_before = src.design.controller.model.K.tolist()
+        cdoc = docs["config"]
+        data, value = cdoc.candidate({"lqr.input_weight.Z": 5.0})
+        src.apply(config=value)
+        cdoc.commit(data, value)
+        out["applied"] = True
+        out["gain_changed"] = src.design.controller.model.K.tolist() != k_before
+        try:
+            data, value = cdoc.candidate({"fusion.gate_probability": 0.5})  # valid file, then the node decides
+            src.apply(config=value)
+            out["second_apply"] = "accepted"
+        except ConfigError as exc:
+            out["second_apply"] = str(exc)
+        src.set_sensor_available("pressure", False)
+        src.set_filter_mode("qualisys.psi", "off")
+        messages.clear()
+        run(2.0)
+        est = [m for m in messages if m[0] == "/rovlab/estimate"]
+        out["sensors_after"] = est[-1][2]["sensors"] if est else None
+        out["node_alive"] = proc.poll() is None
+    finally:
+        src.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+        out["node_exit"] = stop(proc)
+    return out
 
 
 if __name__ == "__main__":

@@ -31,9 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     fil = sub.add_parser("filter", help="estimate depth, heading, velocities and biases from a recorded log")
     fil.add_argument("log", help="CSV log: time_s, tau_Z, tau_N and one column per fused sensor channel "
-                                 "(e.g. z_qualisys, z_pressure, psi_qualisys); empty or nan = no sample. "
-                                 "Or a MAVLink dive: a .tlog, or an .mcap recorded by rovlab mavlink "
-                                 "(needs rovlab[mavlink]; docs/mavlink.md)")
+                                 "(e.g. z_qualisys, z_pressure, psi_qualisys); empty or nan = no sample; or an MCAP "
+                                 "log with rovlab's topics (a simulation's timeseries.mcap, a `rovlab ros2 node "
+                                 "--record` recording); or a MAVLink dive: a .tlog, or an .mcap recorded by "
+                                 "rovlab mavlink (needs rovlab[mavlink]; docs/mavlink.md)")
     fil.add_argument("--out", required=True, help="output CSV (- for standard output)")
     fil.add_argument("--max-gap-steps", type=int, default=10_000, metavar="N",
                      help="a gap of more than N filter samples restarts the filter from its prior instead of "

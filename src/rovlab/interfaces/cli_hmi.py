@@ -22,9 +22,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speed", type=float, default=1.0, help="times real time (0.1 to 50, default 1)")
     p.add_argument("--paused", action="store_true", help="start paused (press Start in the page)")
     p.add_argument("--out", default="out/hmi", help="folder for saved parameters and the session log (default out/hmi)")
-    p.add_argument("--source", choices=("simulation", "mavlink"), default="simulation",
-                   help="simulation (default) or mavlink: an ArduSub vehicle through rovlab's MAVLink bridge "
-                        "(--connect; --vehicle/--config default to bluerov2_heavy)")
+    p.add_argument("--source", choices=("simulation", "ros2", "mavlink"), default="simulation",
+                   help="simulation (default); ros2: a running `rovlab ros2 node` (give it the node's --vehicle "
+                        "and --config; needs rclpy, e.g. in .venv-ros2); mavlink: an ArduSub vehicle through "
+                        "rovlab's MAVLink bridge (--connect; --vehicle/--config default to bluerov2_heavy)")
+    p.add_argument("--namespace", default="", help="with --source ros2: the node's namespace")
     p.add_argument("--connect", default="udpin:127.0.0.1:14550",
                    help="with --source mavlink: pymavlink connection string (default udpin:127.0.0.1:14550)")
     p.add_argument("--arm", action="store_true", help="with --source mavlink: set MANUAL and arm the vehicle")
@@ -47,9 +49,12 @@ def _cmd_hmi(args: argparse.Namespace) -> int:
         raise UserError(f"--speed must be {SPEED_RANGE[0]:g} .. {SPEED_RANGE[1]:g}, got {args.speed:g}")
     if args.seed is not None and args.seed < 0:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
-    source = None
-    if args.source == "mavlink":
+    closing = None
+    if args.source == "ros2":
+        session, closing = _ros2_session(args)
+    elif args.source == "mavlink":
         session, source = _mavlink_session(args)
+        closing = source.close  # neutral commands, disarm what it armed, close the recording
     else:
         session = Session.simulation(args.scenario, vehicle=args.vehicle, config=args.config, seed=args.seed,
                                      out_dir=Path(args.out), speed=args.speed, running=not args.paused)
@@ -57,10 +62,26 @@ def _cmd_hmi(args: argparse.Namespace) -> int:
     try:
         return asyncio.run(_serve(session, args.port, served))
     finally:
-        if source is not None:
-            source.close()  # neutral commands, disarm what it armed, close the recording
         if served:
             _write_log(session)
+        if closing is not None:
+            closing()
+
+
+def _ros2_session(args: argparse.Namespace):
+    """A session on a running ROS 2 vehicle node: the same page and messages as a simulation."""
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.hmi.session import Session
+
+    try:
+        from rovlab.interfaces.node.ros2_source import Ros2Source, hmi_documents
+    except ImportError as exc:
+        raise UserError(f"--source ros2 needs rclpy ({exc}): run the HMI from .venv-ros2 (make ros2-env) or a "
+                        "sourced ROS 2 installation") from None
+    docs, stash = hmi_documents(args.vehicle or "udrone", args.config or "default")
+    source = Ros2Source(vehicle=docs["vehicle"].value, config=docs["config"].value, config_data=docs["config"].data,
+                        stash=stash, namespace=args.namespace)
+    return Session(source, docs, out_dir=Path(args.out), running=not args.paused), source.close
 
 
 def _mavlink_session(args: argparse.Namespace):

@@ -21,6 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="mocap/pose is geometry_msgs/PoseWithCovarianceStamped (default PoseStamped)")
         n.add_argument("--record", default=None, metavar="FILE.mcap",
                        help="record the node's inputs and outputs to MCAP (ROS 2 schemas)")
+        n.add_argument("--remap", action="append", default=[], metavar="FROM:=TO",
+                       help="remap a topic, e.g. mocap/pose:=/qualisys/rov/pose (repeatable)")
         n.set_defaults(func=_cmd_node, ros=ros)
         s = what.add_parser("sim", help="a simulated vehicle in real time on the same topics")
         s.add_argument("--vehicle", default=None, help="vehicle name or TOML file (default: the scenario's)")
@@ -29,14 +31,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         s.add_argument("--no-setpoints", action="store_true",
                        help="do not publish the scenario's reference schedule on NS/setpoint")
         s.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+        s.add_argument("--remap", action="append", default=[], metavar="FROM:=TO",
+                       help="remap a topic (repeatable)")
         s.add_argument("--no-wait", action="store_true",
                        help="start at once (default: hold the initial state until a node subscribes and commands)")
         s.set_defaults(func=_cmd_sim, ros=ros)
 
 
-def _adapter(ros: str):
+def _adapter(ros: str, namespace: str = ""):
+    import os
+
     from rovlab.interfaces.cli import UserError
 
+    if ros == "ros1" and namespace.strip("/"):  # rospy reads its namespace from the environment when imported
+        os.environ["ROS_NAMESPACE"] = "/" + namespace.strip("/")
     try:
         if ros == "ros2":
             from rovlab.interfaces.node import ros2 as mod
@@ -50,10 +58,21 @@ def _adapter(ros: str):
     return mod
 
 
+def _remaps(args: argparse.Namespace) -> list[str]:
+    from rovlab.interfaces.cli import UserError
+
+    for r in args.remap:
+        a, sep, b = r.partition(":=")
+        if not sep or not a or not b or " " in r:
+            raise UserError(f"--remap {r!r}: expected FROM:=TO, e.g. mocap/pose:=/qualisys/rov/pose")
+    return list(args.remap)
+
+
 def _cmd_node(args: argparse.Namespace) -> int:
-    mod = _adapter(args.ros)
+    remaps = _remaps(args)
+    mod = _adapter(args.ros, args.namespace)
     return int(mod.run_node(vehicle=args.vehicle, config=args.config, namespace=args.namespace,
-                            mocap_covariance=args.mocap_covariance, record=args.record))
+                            mocap_covariance=args.mocap_covariance, record=args.record, remaps=remaps))
 
 
 def _cmd_sim(args: argparse.Namespace) -> int:
@@ -61,6 +80,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be > 0 s, got {args.duration}")
-    mod = _adapter(args.ros)
+    remaps = _remaps(args)
+    mod = _adapter(args.ros, args.namespace)
     return int(mod.run_sim(vehicle=args.vehicle, scenario=args.scenario, namespace=args.namespace,
-                           setpoints=not args.no_setpoints, duration_s=args.duration, wait=not args.no_wait))
+                           setpoints=not args.no_setpoints, duration_s=args.duration, wait=not args.no_wait,
+                           remaps=remaps))

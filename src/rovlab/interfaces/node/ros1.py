@@ -177,8 +177,14 @@ class VehicleNode1:
         rospy.loginfo(f"parameters set: {', '.join(changes) or 'surface_pressure_pa'}")
 
 
-def _init(name: str, namespace: str) -> None:
-    argv = ["rovlab"] + ([f"__ns:=/{namespace.strip('/')}"] if namespace.strip("/") else [])
+def _init(name: str, namespace: str, remaps: list[str] | None = None) -> None:
+    # rospy takes its namespace from ROS_NAMESPACE when it is imported (the command line sets it
+    # before importing this module); a namespace given here later cannot take effect
+    ns = "/" + namespace.strip("/") if namespace.strip("/") else "/"
+    if rospy.get_namespace() != ns + ("" if ns.endswith("/") else "/"):
+        raise RuntimeError(f"rospy was imported with namespace {rospy.get_namespace()!r}, not {ns!r}: set "
+                           "ROS_NAMESPACE before importing rovlab.interfaces.node.ros1")
+    argv = ["rovlab", *(remaps or [])]
     rospy.init_node(name, argv=argv, disable_signals=True)
 
 
@@ -197,7 +203,7 @@ def _spin(on_exit: Callable[[], None] | None = None) -> int:
 
 
 def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance: bool = False,
-             record: str | None = None) -> int:
+             record: str | None = None, remaps: list[str] | None = None) -> int:
     """``rovlab ros1 node``."""
     from rovlab.interfaces.node.runtime import load_node
 
@@ -207,7 +213,7 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
         from rovlab.interfaces.node.record import NodeRecorder
 
         recorder = NodeRecorder(record, core, namespace=namespace)
-    _init("rovlab_node", namespace)
+    _init("rovlab_node", namespace, remaps)
     VehicleNode1(core, table, mocap_covariance=mocap_covariance, recorder=recorder)
     rospy.loginfo(f"rovlab node up (ROS 1): vehicle {core.vehicle.name}, configuration {core.config.name}, "
                   f"h = {core.h:g} s; fusing " + ", ".join(c.name for c in core.channels))
@@ -232,7 +238,8 @@ class SimNode1:
         self.last_ref: tuple[float, float] | None = None
         self.last_ref_time = -1e9
         self.lock = threading.Lock()
-        rospy.Timer(rospy.Duration(sim.h), self._on_timer)
+        self.t0: float | None = None
+        rospy.Timer(rospy.Duration(sim.h / 2.0), self._on_timer)
 
     def _on_pwm(self, msg: Any) -> None:
         try:
@@ -254,8 +261,17 @@ class SimNode1:
                 return
             self.waiting = False
             rospy.loginfo("a node is listening and commanding: the simulated vehicle starts")
-        s = self.sim.step()
         now = _now()
+        if self.t0 is None:
+            self.t0 = now
+        due = int((now - self.t0) / self.sim.h + 1e-9) + 1 - self.sim.k  # made up when held up (see ros2.py)
+        for _ in range(min(max(due, 0), 50)):
+            s = self.sim.step()
+            self._publish_step(s, self.t0 + s.t)
+        if due > 50:
+            self.t0 = now - (self.sim.k - 1) * self.sim.h
+
+    def _publish_step(self, s: Any, now: float) -> None:
         by_sensor: dict[str, dict[str, float]] = {}
         for sensor, quantity, value in s.samples:
             by_sensor.setdefault(sensor, {})[quantity] = value
@@ -305,12 +321,12 @@ class SimNode1:
 
 
 def run_sim(*, vehicle: str | None, scenario: str, namespace: str = "", setpoints: bool = True,
-            duration_s: float | None = None, wait: bool = True) -> int:
+            duration_s: float | None = None, wait: bool = True, remaps: list[str] | None = None) -> int:
     """``rovlab ros1 sim``."""
     from rovlab.interfaces.node.runtime import load_sim
 
     sim = load_sim(scenario, vehicle)
-    _init("rovlab_sim", namespace)
+    _init("rovlab_sim", namespace, remaps)
     SimNode1(sim, setpoints=setpoints, wait=wait)
     rospy.loginfo(f"rovlab sim up (ROS 1): scenario {sim.scenario.name}, h = {sim.h:g} s")
     if duration_s is not None:

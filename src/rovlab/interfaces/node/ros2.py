@@ -14,6 +14,7 @@ carries on: nothing from the outside stops the node.
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import time
@@ -28,7 +29,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, Imu
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
 from rovlab.interfaces.node import ros_common as rc
 from rovlab.interfaces.node.core import NodeCore, NodeOutput
@@ -90,6 +91,7 @@ class VehicleNode:
         self.pub_wrench = node.create_publisher(WrenchStamped, rc.TOPICS["wrench"], RELIABLE)
         self.pub_pwm = node.create_publisher(Float64MultiArray, rc.TOPICS["pwm"], RELIABLE)
         self.pub_diag = node.create_publisher(DiagnosticArray, rc.TOPICS["diagnostics"], RELIABLE)
+        self.pub_msgs = node.create_publisher(String, rc.TOPICS["messages"], RELIABLE)
         self._declare_parameters()
         node.add_on_set_parameters_callback(self._on_set_parameters)
         node.create_timer(core.h / 5.0, self._guard("timer", self._on_timer))
@@ -159,6 +161,8 @@ class VehicleNode:
                                                            gains=getattr(self.core.design.controller.model, "K", None)))
             _stamp(d.header.stamp, out.stamp)
             self.pub_diag.publish(d)
+        if self.pub_msgs.get_subscription_count() > 0:  # the HMI (rovlab hmi --source ros2) listens
+            self.pub_msgs.publish(String(data=json.dumps(out.messages())))
         if self.recorder is not None:
             self.recorder.output(out)
 
@@ -219,8 +223,17 @@ def _spin(node: Node, on_exit: Callable[[], None] | None = None) -> int:
     return 0
 
 
+def _ros_args(remaps: list[str] | None) -> list[str]:
+    out = ["rovlab"]
+    if remaps:
+        out.append("--ros-args")
+        for r in remaps:
+            out += ["-r", r]
+    return out
+
+
 def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance: bool = False,
-             record: str | None = None, ros_args: list[str] | None = None) -> int:
+             record: str | None = None, remaps: list[str] | None = None) -> int:
     """``rovlab ros2 node``."""
     from rovlab.interfaces.node.runtime import load_node
 
@@ -230,7 +243,7 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
         from rovlab.interfaces.node.record import NodeRecorder
 
         recorder = NodeRecorder(record, core)
-    rclpy.init(args=["rovlab", *(ros_args or [])], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(args=_ros_args(remaps), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     vn = VehicleNode(core, table, namespace=namespace, mocap_covariance=mocap_covariance, recorder=recorder)
     vn.info(f"rovlab node up: vehicle {core.vehicle.name}, configuration {core.config.name}, h = {core.h:g} s, "
             f"estimator {core.estimator_name}, controller {core.controller_name}; fusing "
@@ -257,8 +270,8 @@ class SimNode:
         node.create_subscription(Float64MultiArray, rc.TOPICS["pwm"], self._on_pwm, RELIABLE)
         self.last_ref: tuple[float, float] | None = None
         self.last_ref_time = -1e9
-        self.start = time.monotonic()
-        node.create_timer(sim.h, self._on_timer)
+        self.t0: float | None = None
+        node.create_timer(sim.h / 2.0, self._on_timer)
 
     def _on_pwm(self, msg: Any) -> None:
         try:
@@ -273,8 +286,19 @@ class SimNode:
                 return
             self.waiting = False
             self.node.get_logger().info("a node is listening and commanding: the simulated vehicle starts")
-        s = self.sim.step()
         now = self.node.get_clock().now().nanoseconds * 1e-9
+        if self.t0 is None:
+            self.t0 = now
+        # the simulated time follows the clock: steps missed while the process was held up are
+        # made up at once (stamped with their own times), at most 50 at a time
+        due = int((now - self.t0) / self.sim.h + 1e-9) + 1 - self.sim.k
+        for _ in range(min(max(due, 0), 50)):
+            s = self.sim.step()
+            self._publish_step(s, self.t0 + s.t)
+        if due > 50:
+            self.t0 = now - (self.sim.k - 1) * self.sim.h
+
+    def _publish_step(self, s: Any, now: float) -> None:
         by_sensor: dict[str, dict[str, float]] = {}
         for sensor, quantity, value in s.samples:
             by_sensor.setdefault(sensor, {})[quantity] = value
@@ -324,12 +348,12 @@ class SimNode:
 
 
 def run_sim(*, vehicle: str | None, scenario: str, namespace: str = "", setpoints: bool = True,
-            duration_s: float | None = None, wait: bool = True, ros_args: list[str] | None = None) -> int:
+            duration_s: float | None = None, wait: bool = True, remaps: list[str] | None = None) -> int:
     """``rovlab ros2 sim``."""
     from rovlab.interfaces.node.runtime import load_sim
 
     sim = load_sim(scenario, vehicle)
-    rclpy.init(args=["rovlab", *(ros_args or [])], signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(args=_ros_args(remaps), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     sn = SimNode(sim, namespace=namespace, setpoints=setpoints, wait=wait)
     sn.node.get_logger().info(f"rovlab sim up: scenario {sim.scenario.name}, vehicle {sim.prep.truth.name}, "
                               f"h = {sim.h:g} s; publishing " + ", ".join(c.name for c in sim.channels))

@@ -19,6 +19,7 @@ wrench                 geometry_msgs/WrenchStamped (demanded)      out (reliable
 thrusters/pwm_us       std_msgs/Float64MultiArray (vehicle order)  out (reliable)
 diagnostics            diagnostic_msgs/DiagnosticArray             out (reliable)
 truth/odometry         nav_msgs/Odometry (simulated vehicle only)  sim out
+rovlab/messages        std_msgs/String: rovlab.io.messages, JSON   out (ROS 2, when the HMI listens)
 =====================  ==========================================  ===========================
 
 Pressure is turned into the sensor's depth as (p - p_surface) / (rho g), with rho and g from the
@@ -40,7 +41,7 @@ from rovlab.interfaces.node.core import NodeCore, NodeOutput
 
 TOPICS = {"pressure": "pressure", "mocap": "mocap/pose", "imu": "imu", "setpoint": "setpoint",
           "odometry": "odometry", "wrench": "wrench", "pwm": "thrusters/pwm_us", "diagnostics": "diagnostics",
-          "truth": "truth/odometry"}
+          "truth": "truth/odometry", "messages": "rovlab/messages"}
 WORLD_FRAME = "map"
 BODY_FRAME = "base_link"
 UNKNOWN_VARIANCE = 1e6  # on the diagonal of quantities the filter does not estimate (x, y, roll, pitch ...)
@@ -254,16 +255,54 @@ def _numeric(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+def parameter_values(data: Mapping[str, Any], design: Any) -> dict[str, Any]:
+    """The run-time parameters of a configuration file's dict (see :class:`ParameterTable`) and
+    their values, for the vehicle node's design (rovlab.sim.runner.Design): name -> value."""
+    return {name: value for name, (_path, value) in _parameters(data, design).items()}
+
+
+def _parameters(data: Mapping[str, Any], design: Any) -> dict[str, tuple[str, Any]]:
+    """name -> (key path in the file, value)."""
+    out: dict[str, tuple[str, Any]] = {}
+
+    def walk(node: Mapping[str, Any], prefix: str) -> None:
+        for key, v in node.items():
+            name = f"{prefix}.{key}"
+            if isinstance(v, Mapping):
+                walk(v, name)
+            elif _numeric(v) or (isinstance(v, list) and v and all(_numeric(x) for x in v)):
+                out[name] = (name, [float(x) for x in v] if isinstance(v, list) else float(v))
+
+    for table in _TUNABLE_TABLES:
+        if isinstance(data.get(table), Mapping):
+            walk(data[table], table)
+    channels = design.estimator.channels
+    for i, (m, c) in enumerate(zip(data.get("measurements", []), design.config.measurements)):
+        ch = next((x for x in channels if x.quantity == c.quantity and
+                   (x.sensor == c.sensor or (c.sensor is None and x.kind == c.kind))), None)
+        if ch is None:
+            continue
+        variance = m.get("variance") if isinstance(m, Mapping) else None
+        out[f"measurements.{ch.sensor}.{ch.quantity}.variance"] = (
+            f"measurements[{i}].variance", float(variance if variance is not None else ch.variance))
+    for c in channels:
+        out.setdefault(f"sensors.{c.sensor}.enabled", ("", True))
+    for c in channels:
+        out[f"filter.{c.name}.mode"] = ("", "auto")
+    return out
+
+
 class ParameterTable:
     """The node's run-time parameters: the configuration file's numbers (process noise W, bias
-    time constants, measurement variances R, fusion settings, LQR weights, MRAC, model overrides)
-    and one on/off switch per sensor.
+    time constants, measurement variances R, fusion settings, LQR weights, MRAC, model overrides),
+    one on/off switch per sensor and one mode per filter channel.
 
     Names are the file's key paths (``process_noise.psd.w``, ``lqr.state_max.z``), a measurement's
     variance is ``measurements.<sensor>.<quantity>.variance``, a sensor switch
-    ``sensors.<sensor>.enabled``. :meth:`set` validates a batch with the configuration loader
-    and redesigns (rovlab.params.design, NodeCore.apply): a refused batch changes nothing and
-    the reason names the parameter and what was expected.
+    ``sensors.<sensor>.enabled`` (true/false), a channel's mode ``filter.<sensor>.<quantity>.mode``
+    ('auto', 'off', 'on'). :meth:`set` validates a batch with the configuration loader and
+    redesigns (rovlab.params.design, NodeCore.apply): a refused batch changes nothing and the
+    reason names the parameter and what was expected.
     """
 
     def __init__(self, core: NodeCore, config_file: str | Path | None, data: Mapping[str, Any]) -> None:
@@ -272,34 +311,9 @@ class ParameterTable:
         self.base = copy.deepcopy(dict(data))
         self.data = copy.deepcopy(dict(data))
         self.edits: dict[str, Any] = {}  # key path (rovlab.params.edit syntax) -> value
-        self._path: dict[str, str] = {}
-        self.values: dict[str, Any] = {}
-        for table in _TUNABLE_TABLES:
-            if isinstance(self.data.get(table), Mapping):
-                self._walk(self.data[table], table)
-        for i, (m, c) in enumerate(zip(self.data.get("measurements", []), core.config.measurements)):
-            ch = next((x for x in core.channels if x.quantity == c.quantity and
-                       (x.sensor == c.sensor or (c.sensor is None and core.vehicle.sensor(x.sensor).kind == c.kind))),
-                      None)
-            if ch is None:
-                continue
-            name = f"measurements.{ch.sensor}.{ch.quantity}.variance"
-            variance = m.get("variance")
-            if variance is None:
-                variance = next(cc.variance for cc in core.design.estimator.channels if cc.name == ch.name)
-            self._path[name] = f"measurements[{i}].variance"
-            self.values[name] = float(variance)
-        for sensor in core.sensors:
-            self.values[f"sensors.{sensor}.enabled"] = True
-
-    def _walk(self, node: Mapping[str, Any], prefix: str) -> None:
-        for key, v in node.items():
-            name = f"{prefix}.{key}"
-            if isinstance(v, Mapping):
-                self._walk(v, name)
-            elif _numeric(v) or (isinstance(v, list) and v and all(_numeric(x) for x in v)):
-                self._path[name] = name
-                self.values[name] = [float(x) for x in v] if isinstance(v, list) else float(v)
+        params = _parameters(self.data, core.design)
+        self._path = {name: path for name, (path, _v) in params.items() if path}
+        self.values: dict[str, Any] = {name: v for name, (_p, v) in params.items()}
 
     def set(self, changes: Mapping[str, Any]) -> str | None:
         """Apply a batch of parameter changes; None on success, else the reason (nothing changed)."""
@@ -308,8 +322,17 @@ class ParameterTable:
         from rovlab.params.validate import ConfigError
 
         switches: dict[str, bool] = {}
+        modes: dict[str, str] = {}
         edits: dict[str, Any] = {}
         for name, value in changes.items():
+            if name.startswith("filter.") and name.endswith(".mode"):
+                channel = name[len("filter."):-len(".mode")]
+                if channel not in [c.name for c in self.core.channels]:
+                    return f"{name}: unknown channel {channel!r}"
+                if value not in ("auto", "off", "on"):
+                    return f"{name} = {value!r}: expected 'auto', 'off' or 'on'"
+                modes[channel] = value
+                continue
             if name.startswith("sensors.") and name.endswith(".enabled"):
                 sensor = name[len("sensors."):-len(".enabled")]
                 if sensor not in self.core.sensors:
@@ -349,6 +372,8 @@ class ParameterTable:
             self.edits.update(edits)
         for sensor, on in switches.items():
             self.core.set_sensor_enabled(sensor, on)
+        for channel, mode in modes.items():
+            self.core.set_filter_mode(channel, mode)
         for name, value in changes.items():
             self.values[name] = value if not isinstance(value, (int, float)) or isinstance(value, bool) else float(value)
         return None
