@@ -19,7 +19,7 @@ ROOT = Path(rovlab.__file__).parent
 LAYER = {"core": 0, "params": 1, "io": 2, "models": 3, "allocation": 4, "estimation": 4, "control": 4,
          "ident": 4, "sim": 5, "interfaces": 6}
 SIBLINGS = {"allocation", "estimation", "control", "ident"}
-EDGE_ONLY = {"matplotlib", "aiohttp", "playwright", "mcap", "dask", "distributed"}
+EDGE_ONLY = {"matplotlib", "aiohttp", "playwright", "mcap", "dask", "distributed", "pymavlink"}
 EDGE_PACKAGES = {"interfaces", "io"}  # plus ident/plots.py and io/report.py, which import lazily
 
 
@@ -78,4 +78,18 @@ def test_heavy_packages_only_at_the_edges():
         for module, line, top_level in _imports(path):
             if module.split(".")[0] in EDGE_ONLY and top_level and pkg not in EDGE_PACKAGES:
                 bad.append(f"{rel}:{line} imports {module} at module level")
+    assert not bad, "\n".join(bad)
+
+
+def test_pymavlink_is_imported_lazily():
+    """`import rovlab` and one-shot commands must not pay for pymavlink: it is imported only inside
+    functions of rovlab.interfaces.mavlink (through rovlab.interfaces.mavlink.mavutil)."""
+    bad = []
+    for path in ROOT.rglob("*.py"):
+        rel = path.relative_to(ROOT)
+        for module, line, top_level in _imports(path):
+            if module.split(".")[0] != "pymavlink":
+                continue
+            if top_level or rel.parts[:2] != ("interfaces", "mavlink"):
+                bad.append(f"{rel}:{line} imports {module}")
     assert not bad, "\n".join(bad)

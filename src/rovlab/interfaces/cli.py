@@ -17,6 +17,7 @@ _COMMAND_MODULES = (
     "rovlab.interfaces.cli_hmi",
     "rovlab.interfaces.cli_compare",
     "rovlab.interfaces.cli_ros",
+    "rovlab.interfaces.cli_mavlink",
 )
 
 
@@ -39,6 +40,7 @@ _COMMAND_MODULE = {
     "compare": "rovlab.interfaces.cli_compare",
     "ros2": "rovlab.interfaces.cli_ros",
     "ros1": "rovlab.interfaces.cli_ros",
+    "mavlink": "rovlab.interfaces.cli_mavlink",
 }
 
 

@@ -10,6 +10,8 @@ import argparse
 import json
 import math
 import sys
+import tempfile
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -31,7 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     fil.add_argument("log", help="CSV log: time_s, tau_Z, tau_N and one column per fused sensor channel "
                                  "(e.g. z_qualisys, z_pressure, psi_qualisys); empty or nan = no sample; or an MCAP "
                                  "log with rovlab's topics (a simulation's timeseries.mcap, a `rovlab ros2 node "
-                                 "--record` recording)")
+                                 "--record` recording); or a MAVLink dive: a .tlog, or an .mcap recorded by "
+                                 "rovlab mavlink (needs rovlab[mavlink]; docs/mavlink.md)")
     fil.add_argument("--out", required=True, help="output CSV (- for standard output)")
     fil.add_argument("--max-gap-steps", type=int, default=10_000, metavar="N",
                      help="a gap of more than N filter samples restarts the filter from its prior instead of "
@@ -154,29 +157,63 @@ def _check_initial(config, model) -> None:
         raise ConfigError(problems, "configuration")
 
 
-def _mcap_as_csv(path: str) -> str:
-    """The time_s, meas_*, tau_* ... columns of an MCAP log, as a temporary CSV removed at exit."""
-    import atexit
-    import os
-    import tempfile
-
-    from rovlab.io.logs import write_csv
-    from rovlab.io.timeseries import read_mcap_columns
-
-    cols = read_mcap_columns(path)
-    fd, tmp = tempfile.mkstemp(prefix="rovlab-replay-", suffix=".csv")
-    os.close(fd)
-
-    def _remove() -> None:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-    atexit.register(_remove)
-    write_csv(tmp, cols)
-    return tmp
-
-
 def _cmd_filter(args: argparse.Namespace) -> int:
+    from rovlab.interfaces.cli import UserError
+
+    if args.max_gap_steps < 1:
+        raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
+    vehicle, config, model = _load(args)
+    _check_initial(config, model)
+    with tempfile.TemporaryDirectory(prefix="rovlab-filter-") as tmp:
+        return _filter(args, vehicle, config, model, _as_csv(args.log, vehicle, model, Path(tmp)))
+
+
+def _as_csv(log: str, vehicle, model, folder: Path) -> str:
+    """The log as a CSV the filter reads: a CSV as it is; a MAVLink dive (.tlog, or an .mcap with
+    /mavlink/ topics) converted from its telemetry; another .mcap (rovlab's topics: a simulation
+    or a vehicle node's recording) from its measurement and command columns."""
+    from rovlab.interfaces.cli import UserError
+
+    suffix = Path(log).suffix.lower()
+    if suffix == ".tlog":
+        return _mavlink_as_csv(log, vehicle, model, folder)
+    if suffix != ".mcap":
+        return log
+    try:
+        from rovlab.io.timeseries import mcap_topics, read_mcap_columns
+
+        topics = mcap_topics(log)
+    except (ImportError, RuntimeError):
+        raise UserError("reading MCAP needs the 'mcap' package: pip install 'rovlab[log]'") from None
+    except OSError as exc:
+        raise UserError(f"cannot read {log}: {exc.strerror or exc}") from None
+    if any(t.startswith("/mavlink/") for t in topics):
+        return _mavlink_as_csv(log, vehicle, model, folder)
+    from rovlab.io.logs import write_csv
+
+    out = folder / (Path(log).stem + ".csv")
+    write_csv(out, read_mcap_columns(log), exact=("time_s",))
+    return str(out)
+
+
+def _mavlink_as_csv(log: str, vehicle, model, folder: Path) -> str:
+    """A MAVLink dive (.tlog, or .mcap recorded by rovlab mavlink) as the CSV the filter reads."""
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.mavlink import MavlinkMissing
+    from rovlab.interfaces.mavlink.logs import LogError, write_filter_log
+
+    out = folder / (Path(log).stem + ".csv")
+    try:
+        summary = write_filter_log(log, vehicle, model, out)
+    except (LogError, MavlinkMissing, RuntimeError) as exc:
+        raise UserError(str(exc)) from None
+    counts = ", ".join(f"{k} {v}" for k, v in summary["samples"].items())
+    print(f"rovlab filter: {log}: {summary['messages']} MAVLink messages -> {summary['rows']} rows ({counts})",
+          file=sys.stderr)
+    return str(out)
+
+
+def _filter(args: argparse.Namespace, vehicle, config, model, log: str) -> int:
     from rovlab.estimation.fusion import (
         EVENT_NONFINITE,
         EVENT_REJECTED,
@@ -191,19 +228,12 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     from rovlab.io.logs import ChunkWriter, LogStream
     from rovlab.io.tables import write_sidecar
 
-    if args.max_gap_steps < 1:
-        raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
-    vehicle, config, model = _load(args)
-    _check_initial(config, model)
     filt = DepthHeadingFilter(model)
     columns = [c.column for c in model.channels]
     # a simulation's timeseries.csv names the samples meas_<quantity>_<sensor>: read those as they are
-    log_path = args.log
-    if str(args.log).lower().endswith(".mcap"):  # a recording: its rovlab topics as a CSV log
-        log_path = _mcap_as_csv(args.log)
-    header = set(LogStream(log_path, required=("time_s",)).header)
+    header = set(LogStream(log, required=("time_s",)).header)
     source = {c: f"meas_{c}" if c not in header and f"meas_{c}" in header else c for c in columns}
-    stream = LogStream(log_path, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
+    stream = LogStream(log, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
     runner = StreamingFilter(filt, max_gap_steps=args.max_gap_steps)
     m = len(columns)
     # status codes -> labels ('ok', 'lost-timeout', ...): code = 8 status + reason

@@ -22,10 +22,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speed", type=float, default=1.0, help="times real time (0.1 to 50, default 1)")
     p.add_argument("--paused", action="store_true", help="start paused (press Start in the page)")
     p.add_argument("--out", default="out/hmi", help="folder for saved parameters and the session log (default out/hmi)")
-    p.add_argument("--source", choices=("simulation", "ros2"), default="simulation",
-                   help="simulation (default), or ros2: a running `rovlab ros2 node` (give it the node's --vehicle "
-                        "and --config; needs rclpy, e.g. in .venv-ros2)")
+    p.add_argument("--source", choices=("simulation", "ros2", "mavlink"), default="simulation",
+                   help="simulation (default); ros2: a running `rovlab ros2 node` (give it the node's --vehicle "
+                        "and --config; needs rclpy, e.g. in .venv-ros2); mavlink: an ArduSub vehicle through "
+                        "rovlab's MAVLink bridge (--connect; --vehicle/--config default to bluerov2_heavy)")
     p.add_argument("--namespace", default="", help="with --source ros2: the node's namespace")
+    p.add_argument("--connect", default="udpin:127.0.0.1:14550",
+                   help="with --source mavlink: pymavlink connection string (default udpin:127.0.0.1:14550)")
+    p.add_argument("--arm", action="store_true", help="with --source mavlink: set MANUAL and arm the vehicle")
+    p.add_argument("--record", default=None, help="with --source mavlink: record the telemetry to this MCAP file")
     p.set_defaults(func=_cmd_hmi)
 
 
@@ -47,6 +52,9 @@ def _cmd_hmi(args: argparse.Namespace) -> int:
     closing = None
     if args.source == "ros2":
         session, closing = _ros2_session(args)
+    elif args.source == "mavlink":
+        session, source = _mavlink_session(args)
+        closing = source.close  # neutral commands, disarm what it armed, close the recording
     else:
         session = Session.simulation(args.scenario, vehicle=args.vehicle, config=args.config, seed=args.seed,
                                      out_dir=Path(args.out), speed=args.speed, running=not args.paused)
@@ -76,6 +84,27 @@ def _ros2_session(args: argparse.Namespace):
     return Session(source, docs, out_dir=Path(args.out), running=not args.paused), source.close
 
 
+def _mavlink_session(args: argparse.Namespace):
+    """A session on an ArduSub vehicle through the MAVLink bridge (rovlab.interfaces.mavlink)."""
+    from rovlab.interfaces.cli_mavlink import make_bridge
+    from rovlab.interfaces.hmi.session import Session
+
+    vehicle = args.vehicle or "bluerov2_heavy"
+    config = args.config or "bluerov2_heavy"
+    bridge_args = argparse.Namespace(connect=args.connect, vehicle=vehicle, config=config, target_system=1, sysid=255,
+                                     command="manual_control", command_hz=None, telemetry_timeout=0.5, arm=args.arm,
+                                     record=args.record)
+    bridge = make_bridge(bridge_args, lambda text: print(f"rovlab hmi: mavlink: {text}", file=sys.stderr, flush=True))
+    from rovlab.interfaces.mavlink.source import MavlinkSource
+
+    source = MavlinkSource(bridge)
+    try:
+        return Session.for_vehicle(source, vehicle=vehicle, config=config, out_dir=Path(args.out)), source
+    except Exception:
+        source.close()
+        raise
+
+
 async def _serve(session, port: int, served: list[bool]) -> int:
     from rovlab.interfaces.cli import UserError
     from rovlab.interfaces.hmi.server import HmiServer
@@ -89,8 +118,11 @@ async def _serve(session, port: int, served: list[bool]) -> int:
                         "(use --port 0 for a free port)") from None
     served.append(True)
     src = session.source.describe()
-    print(f"rovlab hmi: {src['scenario']['name']} with {src['vehicle']} / {src['config']} "
-          f"({'running' if session.running else 'paused'}, {session.speed:g}x real time)")
+    if session.source.paced:
+        print(f"rovlab hmi: {src['scenario']['name']} with {src['vehicle']} / {src['config']} "
+              f"({'running' if session.running else 'paused'}, {session.speed:g}x real time)")
+    else:
+        print(f"rovlab hmi: {src['scenario']['name']} with {src['vehicle']} / {src['config']} (its own clock)")
     print(f"rovlab hmi: open {url} in a browser (Ctrl-C stops; the session log goes to {session.log.folder}/)",
           flush=True)
     stop = asyncio.Event()

@@ -9,6 +9,7 @@ and other robotics tools.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -90,6 +91,128 @@ def _ros2_messages(topic: str, stamp: int, msg: Mapping[str, Any]):
         yield "/rovlab/odometry/estimate", ros2msg.odometry(stamp, msg["state"], msg.get("variance"))
     elif topic == "/rovlab/command" and msg.get("tau"):
         yield "/rovlab/wrench", ros2msg.wrench_stamped(stamp, msg["tau"])
+
+
+class McapStream:
+    """An MCAP file written message by message (a live recording: a vehicle bridge's telemetry).
+
+    Every topic carries JSON messages; a topic's JSON Schema is given with its first message (or
+    a permissive one). The file is written in place as messages arrive, in chunks of
+    ``chunk_size`` bytes, so a recording that is closed (:meth:`close`, also on Ctrl-C through
+    the caller's ``finally``) is complete, and one whose process is killed keeps the chunks
+    already written. Requires `mcap` (``pip install 'rovlab[log]'``).
+    """
+
+    def __init__(self, path: str | Path, *, metadata: Mapping[str, str] | None = None,
+                 chunk_size: int = 256 * 1024) -> None:
+        try:
+            from mcap.writer import CompressionType, Writer
+        except ImportError as exc:  # pragma: no cover - optional extra
+            raise RuntimeError("writing MCAP needs the 'mcap' package: pip install 'rovlab[log]'") from exc
+        self.path = Path(path)
+        self._fh = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        self._writer = Writer(self._fh, compression=CompressionType.NONE, chunk_size=chunk_size)
+        self._writer.start(profile="", library="rovlab")
+        self._writer.add_metadata("rovlab", {k: str(v) for k, v in (metadata or {}).items()})
+        self._channels: dict[str, int] = {}
+        self._seq = 0
+        self.count = 0
+        self.closed = False
+
+    def write(self, topic: str, time_unix_s: float, message: Mapping[str, Any], *,
+              schema: Mapping[str, Any] | None = None) -> None:
+        """One JSON message on a topic, stamped with a UNIX time [s]."""
+        if self.closed:
+            raise ValueError(f"{self.path}: recording already closed")
+        cid = self._channels.get(topic)
+        if cid is None:
+            sch = schema if schema is not None else TOPICS.get(topic, {"type": "object"})
+            sid = self._writer.register_schema(name=topic.strip("/").replace("/", "."), encoding="jsonschema",
+                                               data=json.dumps(sch).encode())
+            cid = self._channels[topic] = self._writer.register_channel(topic=topic, message_encoding="json",
+                                                                        schema_id=sid)
+        stamp = int(round(time_unix_s * 1e9))
+        data = json.dumps(_finite(message), allow_nan=False, default=_json_default).encode()
+        self._writer.add_message(cid, log_time=stamp, data=data, publish_time=stamp, sequence=self._seq)
+        self._seq += 1
+        self.count += 1
+
+    def close(self) -> None:
+        """Finish the file (summary and index); safe to call twice."""
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self._writer.finish()
+        finally:
+            self._fh.close()
+
+
+def _finite(value: Any) -> Any:
+    """NaN and infinities as null (JSON has neither), inside dicts and lists too."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, (bytes, bytearray)):
+        return value.decode("latin-1")
+    if isinstance(value, np.generic):
+        return value.item()
+    return str(value)
+
+
+def mcap_topics(path: str | Path) -> set[str]:
+    """The topics of an MCAP file (from its summary, or by reading it through if it has none)."""
+    from mcap.reader import NonSeekingReader, make_reader
+
+    with open(path, "rb") as fh:
+        try:
+            summary = make_reader(fh).get_summary()
+        except Exception:  # noqa: BLE001 - no usable summary: read it through
+            summary = None
+        if summary is not None:
+            return {c.topic for c in summary.channels.values()}
+        fh.seek(0)
+        topics: set[str] = set()
+        try:
+            for _schema, channel, _message in NonSeekingReader(fh).iter_messages():
+                topics.add(channel.topic)
+        except Exception:  # noqa: BLE001 - the cut-off end of a recording
+            pass
+        return topics
+
+
+def read_mcap_json(path: str | Path, *, prefix: str = "/") -> Any:
+    """(topic, UNIX time [s], message dict) of the JSON messages on topics starting with prefix,
+    in log-time order. Requires `mcap`."""
+    try:
+        from mcap.reader import make_reader
+    except ImportError as exc:  # pragma: no cover - optional extra
+        raise RuntimeError("reading MCAP needs the 'mcap' package: pip install 'rovlab[log]'") from exc
+    from mcap.reader import NonSeekingReader
+
+    with open(path, "rb") as fh:
+        try:  # a finished file: its index gives log-time order
+            items = list(make_reader(fh).iter_messages(log_time_order=True))
+        except Exception:  # noqa: BLE001 - a recording cut short (no summary): read it front to back
+            fh.seek(0)
+            items = []
+            try:
+                for item in NonSeekingReader(fh).iter_messages():
+                    items.append(item)
+            except Exception:  # noqa: BLE001 - the cut-off end
+                pass
+            items.sort(key=lambda m: m[2].log_time)
+        for _schema, channel, message in items:
+            if channel.message_encoding != "json" or not channel.topic.startswith(prefix):
+                continue
+            yield channel.topic, message.log_time / 1e9, json.loads(message.data)
 
 
 # JSON topic -> (field, column prefix) of the columns it carries (the inverse of rows_to_messages)

@@ -304,6 +304,19 @@ class HmiServer:
         assert self._wake is not None
         while True:
             s = self.session
+            if not s.source.paced:  # a vehicle bridge runs on its own clock: collect what it produced
+                try:
+                    messages = s.advance(1)
+                except Exception as exc:  # noqa: BLE001 - keep serving; tell everyone
+                    traceback.print_exc(file=sys.stderr)
+                    self.broadcast({"type": "error", "cmd": None, "message": f"the source failed: {exc!r}"})
+                    messages = []
+                if messages:
+                    self._broadcast_messages(messages)
+                with contextlib.suppress(asyncio.TimeoutError):
+                    await asyncio.wait_for(self._wake.wait(), timeout=max(self.frame_interval_s, 0.02))
+                self._wake.clear()
+                continue
             if not (s.running and s.source.paced):
                 self._anchor = None
                 await self._wake.wait()

@@ -125,6 +125,16 @@ class Session:
         return cls(SimulationSource(sim), {"vehicle": vdoc, "truth": tdoc, "config": cdoc}, out_dir=out_dir,
                    speed=speed, running=running)
 
+    @classmethod
+    def for_vehicle(cls, source: Source, *, vehicle: str, config: str, out_dir: str | Path = "out/hmi") -> Session:
+        """A session on a vehicle bridge's source (its own clock, no truth): the model vehicle and
+        configuration documents the bridge runs (the truth document mirrors the vehicle file; a
+        vehicle refuses changes to it)."""
+        vdoc = _vehicle_document("vehicle", vehicle)
+        tdoc = _vehicle_document("truth", vehicle)
+        cdoc = _config_document(config)
+        return cls(source, {"vehicle": vdoc, "truth": tdoc, "config": cdoc}, out_dir=out_dir, running=False)
+
     # -- running -------------------------------------------------------------------------------
     def advance(self, n: int) -> list[Message]:
         """Run n steps of the source, log their messages and remember the latest of each topic."""

@@ -144,37 +144,43 @@ class SimulationSource:
 
     def loop_summary(self) -> dict[str, Any]:
         prep = self.sim.prep
-        fm = prep.filter_model
-        v, t = prep.vehicle, prep.truth
-        if hasattr(fm, "T_w"):  # the depth-and-heading filter
-            model = {**prep.config.model_values(v), "T_w": fm.T_w, "T_r": fm.T_r, "M_w": fm.params.M_w,
-                     "M_r": fm.params.M_r}
-            W, Q = np.diag(fm.W)[2:], np.diag(fm.Q)
-        else:  # the 4-DOF EKF: its heave and yaw entries in the same shape (W: Z, N, b_Z, b_N)
-            M = np.diag(mass_matrix(v))
-            model = {**prep.config.model_values(v), "T_w": float(1.0 / fm.inv_T[2]), "T_r": float(1.0 / fm.inv_T[3]),
-                     "M_w": float(M[2]), "M_r": float(M[3])}
-            W, Q = fm.W[[2, 3, 6, 7]], np.diag(fm.Q0)
-        ctl = prep.design.controller.model
-        out: dict[str, Any] = {
-            "model": model,
-            "vehicle": _vehicle_summary(v),
-            "truth": _vehicle_summary(t),
-            "W": _floats(W),
-            "R": {c.name: c.variance for c in fm.channels},
-            "Q_diag": _floats(Q),
-            "lqr_Q": _floats(prep.config.lqr_Q),
-            "lqr_R": _floats(prep.config.lqr_R),
-            "K": [_floats(row) for row in getattr(ctl, "K", np.zeros((0, 0)))],
-            "P": [_floats(row) for row in getattr(ctl, "P", np.zeros((0, 0)))],
-            "controller": _controller_name(prep),
-        }
-        if hasattr(ctl, "Kp"):  # the DP controller: its gains per axis x, y, z, psi
-            out["dp"] = {"Kp": _floats(ctl.Kp), "Ki": _floats(ctl.Ki), "Kd": _floats(ctl.Kd), "M": _floats(ctl.M)}
-        summary = getattr(prep.design.controller.model, "summary", None)
-        if callable(summary):  # an adaptive controller's design (MRAC: reference model, gains, bounds)
-            out["mrac"] = summary()
-        return out
+        return design_summary(prep.design, truth=prep.truth, controller=_controller_name(prep))
+
+
+def design_summary(design: Any, *, truth: Vehicle, controller: str) -> dict[str, Any]:
+    """The parameters and gains of a running design (rovlab.sim.runner.Design), as the HMI shows
+    them: shared by the simulation and the vehicle bridges' sources."""
+    fm = design.estimator.model
+    v, config = design.vehicle, design.config
+    if hasattr(fm, "T_w"):  # the depth-and-heading filter
+        model = {**config.model_values(v), "T_w": fm.T_w, "T_r": fm.T_r, "M_w": fm.params.M_w,
+                 "M_r": fm.params.M_r}
+        W, Q = np.diag(fm.W)[2:], np.diag(fm.Q)
+    else:  # the 4-DOF EKF: its heave and yaw entries in the same shape (W: Z, N, b_Z, b_N)
+        M = np.diag(mass_matrix(v))
+        model = {**config.model_values(v), "T_w": float(1.0 / fm.inv_T[2]), "T_r": float(1.0 / fm.inv_T[3]),
+                 "M_w": float(M[2]), "M_r": float(M[3])}
+        W, Q = fm.W[[2, 3, 6, 7]], np.diag(fm.Q0)
+    ctl = design.controller.model
+    out: dict[str, Any] = {
+        "model": model,
+        "vehicle": _vehicle_summary(v),
+        "truth": _vehicle_summary(truth),
+        "W": _floats(W),
+        "R": {c.name: c.variance for c in fm.channels},
+        "Q_diag": _floats(Q),
+        "lqr_Q": _floats(config.lqr_Q),
+        "lqr_R": _floats(config.lqr_R),
+        "K": [_floats(row) for row in getattr(ctl, "K", np.zeros((0, 0)))],
+        "P": [_floats(row) for row in getattr(ctl, "P", np.zeros((0, 0)))],
+        "controller": controller,
+    }
+    if hasattr(ctl, "Kp"):  # the DP controller: its gains per axis x, y, z, psi
+        out["dp"] = {"Kp": _floats(ctl.Kp), "Ki": _floats(ctl.Ki), "Kd": _floats(ctl.Kd), "M": _floats(ctl.M)}
+    summary = getattr(ctl, "summary", None)
+    if callable(summary):  # an adaptive controller's design (MRAC: reference model, gains, bounds)
+        out["mrac"] = summary()
+    return out
 
 
 def _controller_name(prep: Any) -> str:

@@ -1,0 +1,280 @@
+"""Sub-command ``mavlink``: a simulated ArduSub vehicle (``sim``), the bridge from an ArduSub
+vehicle to rovlab's estimator and controller (``bridge``) and the conversion of MAVLink logs
+(``convert``). pymavlink is imported only when one of them runs (docs/mavlink.md)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+from typing import Any
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("mavlink", help="MAVLink for ArduSub vehicles (BlueROV2): simulator, bridge, log conversion")
+    cmds = p.add_subparsers(dest="mavlink_command", metavar="ACTION")
+    cmds.required = True
+
+    s = cmds.add_parser("sim", help="a simulated ArduSub vehicle speaking MAVLink, on rovlab's plant model")
+    s.add_argument("--vehicle", default="bluerov2_heavy",
+                   help="vehicle name or TOML file (default bluerov2_heavy)")
+    s.add_argument("--connect", default="udpout:127.0.0.1:14550",
+                   help="pymavlink connection string (default udpout:127.0.0.1:14550: sends to a ground "
+                        "station listening with udpin on 14550, as a vehicle does)")
+    s.add_argument("--depth", type=float, default=0.0, help="initial depth [m] (default 0)")
+    s.add_argument("--heading-deg", type=float, default=0.0, help="initial heading [deg] (default 0)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the plant and sensor noise (default 0)")
+    s.add_argument("--local-position", action="store_true",
+                   help="also send LOCAL_POSITION_NED (as a vehicle with a positioning system does)")
+    s.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: run "
+                                                                "until Ctrl-C)")
+    s.set_defaults(func=_cmd_sim)
+
+    b = cmds.add_parser("bridge", help="run rovlab's estimator (and controller) on an ArduSub vehicle over MAVLink")
+    add_bridge_arguments(b)
+    b.add_argument("--depth", type=float, default=None,
+                   help="depth set-point [m]: engages the controller (default: estimate only, command nothing)")
+    b.add_argument("--heading-deg", type=float, default=None, help="heading set-point [deg] (with --depth; default: "
+                                                                  "the estimated heading when engaged)")
+    b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: Ctrl-C)")
+    b.add_argument("--status-every", type=float, default=2.0, help="print the estimate every N s (0: never)")
+    b.set_defaults(func=_cmd_bridge)
+
+    r = cmds.add_parser("record", help="record a vehicle's MAVLink telemetry to MCAP (a listener: sends nothing)")
+    r.add_argument("--connect", default="udpin:127.0.0.1:14550",
+                   help="pymavlink connection string (default udpin:127.0.0.1:14550, where a vehicle sends)")
+    r.add_argument("--out", required=True, help="MCAP file to write (replay it with rovlab filter FILE.mcap)")
+    r.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: Ctrl-C)")
+    r.set_defaults(func=_cmd_record)
+
+    c = cmds.add_parser("convert", help="a .tlog or recorded .mcap as the CSV log rovlab filter reads")
+    c.add_argument("log", help=".tlog (QGroundControl, MAVProxy, BlueOS) or .mcap recorded by rovlab mavlink")
+    c.add_argument("--vehicle", default="bluerov2_heavy", help="vehicle name or TOML file (default bluerov2_heavy)")
+    c.add_argument("--config", default="bluerov2_heavy", help="filter configuration (default bluerov2_heavy): "
+                                                              "its channels and sample time shape the CSV")
+    c.add_argument("--surface-hpa", type=float, default=None,
+                   help="surface pressure [hPa] (default: BARO2_GND_PRESS from the log, else 1013.25)")
+    c.add_argument("--out", required=True, help="CSV file to write")
+    c.set_defaults(func=_cmd_convert)
+
+
+def add_bridge_arguments(p: argparse.ArgumentParser, *, connect_default: str = "udpin:127.0.0.1:14550") -> None:
+    """Options of the bridge, shared with ``rovlab hmi --source mavlink``."""
+    p.add_argument("--connect", default=connect_default,
+                   help=f"pymavlink connection string to the vehicle (default {connect_default}: where ArduSub / "
+                        "BlueOS sends telemetry to a topside)")
+    p.add_argument("--vehicle", default="bluerov2_heavy", help="vehicle name or TOML file (default bluerov2_heavy)")
+    p.add_argument("--config", default="bluerov2_heavy",
+                   help="filter/controller configuration name or TOML file (default bluerov2_heavy)")
+    p.add_argument("--target-system", type=int, default=1, help="the vehicle's MAVLink system id (default 1)")
+    p.add_argument("--sysid", type=int, default=255,
+                   help="the bridge's MAVLink system id; must equal the vehicle's SYSID_MYGCS (default 255)")
+    p.add_argument("--command", choices=("manual_control", "rc_override"), default="manual_control",
+                   help="how to command ArduSub: MANUAL_CONTROL (default) or RC_CHANNELS_OVERRIDE")
+    p.add_argument("--command-hz", type=float, default=None, help="command rate [Hz] (default: the control rate)")
+    p.add_argument("--telemetry-timeout", type=float, default=0.5,
+                   help="seconds without telemetry before neutral commands are sent (default 0.5)")
+    p.add_argument("--arm", action="store_true", help="set MANUAL mode and arm the vehicle (disarm on exit)")
+    p.add_argument("--record", default=None, help="record telemetry and rovlab's messages to this MCAP file")
+
+
+def make_bridge(args: argparse.Namespace, log: Any) -> Any:
+    """A MavlinkBridge from the shared options (UserError for bad ones)."""
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.mavlink import MavlinkMissing
+    from rovlab.params.design import load_design_config
+    from rovlab.params.vehicle import load_vehicle
+
+    _check_connect(args.connect)
+    for name in ("target_system", "sysid"):
+        if not 1 <= getattr(args, name) <= 255:
+            raise UserError(f"--{name.replace('_', '-')} must be 1 .. 255, got {getattr(args, name)}")
+    vehicle = load_vehicle(args.vehicle)
+    config = load_design_config(args.config)
+    try:
+        from rovlab.interfaces.mavlink.bridge import MavlinkBridge
+
+        return MavlinkBridge(vehicle, config, connect=args.connect, target_system=args.target_system,
+                             sysid=args.sysid, command=args.command, command_hz=args.command_hz,
+                             telemetry_timeout_s=args.telemetry_timeout, arm=args.arm, record=args.record, log=log)
+    except MavlinkMissing as exc:
+        raise UserError(str(exc)) from None
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot open {args.connect} or {args.record}: {exc.strerror or exc}") from None
+
+
+def _check_connect(url: str) -> None:
+    from rovlab.interfaces.cli import UserError
+
+    kind, _, rest = url.partition(":")
+    if kind in ("udpin", "udpout", "udp", "tcp", "tcpin"):
+        port = rest.rsplit(":", 1)[-1]
+        if not port.isdigit() or not 0 < int(port) < 65536:
+            raise UserError(f"--connect {url!r}: expected e.g. udpin:127.0.0.1:14550 (a port 1 .. 65535)")
+    elif not kind:
+        raise UserError(f"--connect {url!r}: expected a pymavlink connection string such as udpin:127.0.0.1:14550")
+
+
+def _stop_on_signals(stop: Any) -> None:
+    def handler(signum: int, frame: Any) -> None:
+        stop()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            signal.signal(sig, handler)
+        except ValueError:  # pragma: no cover - not in the main thread
+            pass
+
+
+def _cmd_sim(args: argparse.Namespace) -> int:
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.mavlink import MavlinkMissing
+    from rovlab.params.vehicle import load_vehicle
+
+    for name in ("depth", "heading_deg"):
+        if not math.isfinite(getattr(args, name)):
+            raise UserError(f"--{name.replace('_', '-')} must be a finite number")
+    if args.duration is not None and not args.duration > 0:
+        raise UserError(f"--duration must be > 0 s, got {args.duration}")
+    _check_connect(args.connect)
+    vehicle = load_vehicle(args.vehicle)
+    try:
+        from rovlab.interfaces.mavlink.vehicle_sim import ArduSubSim
+
+        sim = ArduSubSim(vehicle, connect=args.connect, seed=args.seed, depth_m=args.depth,
+                         heading_rad=math.radians(args.heading_deg), local_position=args.local_position,
+                         log=lambda text: print(f"rovlab mavlink sim: {text}", file=sys.stderr, flush=True))
+    except MavlinkMissing as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot open {args.connect}: {exc.strerror or exc}") from None
+    _stop_on_signals(sim.stop)
+    print(f"rovlab mavlink sim: {vehicle.name} as ArduSub system {sim.sysid} on {args.connect} "
+          f"({len(vehicle.thrusters)} thrusters; Ctrl-C stops)", flush=True)
+    try:
+        sim.run(duration_s=args.duration)
+    finally:
+        sim.close()
+        print(f"rovlab mavlink sim: stopped ({sim.counts['received']} messages received, "
+              f"{sim.counts['bad_data']} malformed, {sim.counts['refused']} refused)", file=sys.stderr, flush=True)
+    return 0
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    import threading
+    import time
+
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.mavlink import MavlinkMissing, mavutil
+    from rovlab.interfaces.mavlink.logs import TelemetryRecorder
+
+    if args.duration is not None and not args.duration > 0:
+        raise UserError(f"--duration must be > 0 s, got {args.duration}")
+    _check_connect(args.connect)
+    try:
+        conn = mavutil().mavlink_connection(args.connect, source_system=255, source_component=191,
+                                            dialect="ardupilotmega")
+    except MavlinkMissing as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot open {args.connect}: {exc.strerror or exc}") from None
+    try:
+        recorder = TelemetryRecorder(args.out, metadata={"connect": args.connect})
+    except OSError as exc:
+        conn.close()
+        raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    stop = threading.Event()
+    _stop_on_signals(stop.set)
+    print(f"rovlab mavlink record: {args.connect} -> {args.out} (Ctrl-C stops)", flush=True)
+    start = time.monotonic()
+    bad = 0
+    try:
+        while not stop.is_set() and (args.duration is None or time.monotonic() - start < args.duration):
+            try:
+                msg = conn.recv_match(blocking=True, timeout=0.1)
+            except Exception:  # noqa: BLE001 - a broken packet must not end the recording
+                bad += 1
+                continue
+            if msg is None:
+                continue
+            if msg.get_type() == "BAD_DATA":
+                bad += 1
+                continue
+            recorder.mavlink(msg, time.time())
+    finally:
+        recorder.close()  # nothing recorded is lost, whatever ended the loop
+        conn.close()
+        print(f"rovlab mavlink record: {recorder.stream.count} messages -> {args.out}"
+              + (f" ({bad} malformed skipped)" if bad else ""), file=sys.stderr, flush=True)
+    return 0
+
+
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from rovlab.estimation.model import build_filter_model
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.mavlink import MavlinkMissing
+    from rovlab.interfaces.mavlink.logs import LogError, write_filter_log
+    from rovlab.params.design import load_design_config
+    from rovlab.params.vehicle import load_vehicle
+
+    if args.surface_hpa is not None and not (math.isfinite(args.surface_hpa) and 500 <= args.surface_hpa <= 1100):
+        raise UserError(f"--surface-hpa must be 500 .. 1100 hPa, got {args.surface_hpa}")
+    vehicle = load_vehicle(args.vehicle)
+    model = build_filter_model(vehicle, load_design_config(args.config))
+    try:
+        summary = write_filter_log(args.log, vehicle, model, args.out, surface_hpa=args.surface_hpa)
+    except (LogError, MavlinkMissing, RuntimeError) as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    counts = ", ".join(f"{k} {v}" for k, v in summary["samples"].items())
+    print(f"{args.log}: {summary['messages']} MAVLink messages -> {args.out}: {summary['rows']} rows ({counts})")
+    return 0
+
+
+def _cmd_bridge(args: argparse.Namespace) -> int:
+    import threading
+    import time
+
+    from rovlab.interfaces.cli import UserError
+
+    for name in ("depth", "heading_deg", "duration"):
+        v = getattr(args, name)
+        if v is not None and not math.isfinite(v):
+            raise UserError(f"--{name.replace('_', '-')} must be a finite number")
+    if args.depth is not None and args.depth < 0:
+        raise UserError(f"--depth must be >= 0 m (z is positive down), got {args.depth}")
+    if args.heading_deg is not None and args.depth is None:
+        raise UserError("--heading-deg needs --depth (the controller holds both)")
+    if args.duration is not None and not args.duration > 0:
+        raise UserError(f"--duration must be > 0 s, got {args.duration}")
+
+    def log(text: str) -> None:
+        print(f"rovlab mavlink bridge: {text}", file=sys.stderr, flush=True)
+
+    bridge = make_bridge(args, log)
+    if args.depth is not None:
+        bridge.set_reference(z=args.depth, psi=None if args.heading_deg is None else math.radians(args.heading_deg))
+    _stop_on_signals(bridge.stop)
+    print(f"rovlab mavlink bridge: {bridge.core.vehicle.name}/{bridge.core.config.name} on {args.connect} "
+          f"({'holding ' + format(args.depth, 'g') + ' m' if args.depth is not None else 'estimating only'}; "
+          "Ctrl-C stops)", flush=True)
+    thread = threading.Thread(target=bridge.run, kwargs={"duration_s": args.duration}, daemon=True)
+    thread.start()
+    next_print = time.monotonic() + args.status_every if args.status_every > 0 else math.inf
+    while thread.is_alive():
+        thread.join(0.2)
+        if time.monotonic() >= next_print and bridge.core.last is not None:
+            next_print += args.status_every
+            o = bridge.core.last
+            print(f"t={o.t:7.1f} s  z={o.x[0]:.3f} m  psi={math.degrees(o.x[1]):6.1f} deg  "
+                  f"tau_Z={o.tau[2]:6.2f} N  sensors={o.sensor_status}  "
+                  f"{'FAILSAFE ' if bridge.failsafe else ''}{'armed' if bridge.armed else 'disarmed'}", flush=True)
+    c = bridge.counts
+    print(f"rovlab mavlink bridge: stopped ({c['received']} messages in, {c['commands']} commands out, "
+          f"{c['failsafes']} telemetry failsafes)" + (f"; recording: {args.record}" if args.record else ""),
+          file=sys.stderr, flush=True)
+    return 0

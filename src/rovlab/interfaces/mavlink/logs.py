@@ -1,0 +1,268 @@
+"""MAVLink telemetry logs: recorded to MCAP, read back (MCAP or a ground station's .tlog) and
+turned into the log that ``rovlab filter`` reads, so a real ArduSub dive can be replayed
+through the estimator.
+
+* :class:`TelemetryRecorder` writes every MAVLink message as JSON on ``/mavlink/<TYPE>`` (fields
+  in MAVLink's own units, plus ``_sysid``/``_compid``) and, beside them, rovlab's own messages
+  (``/rovlab/estimate``, ``/rovlab/command`` ... of rovlab.io.messages) -- one file that Foxglove
+  opens and this module reads back.
+* :func:`read_records` reads (time, type, fields) from an MCAP written that way or from a .tlog
+  (QGroundControl, MAVProxy and BlueOS record those) through pymavlink.
+* :class:`SampleMap` is the one mapping from MAVLink telemetry to the filter's measurement
+  channels (SI units), used both live by the bridge and offline here:
+  pressure z <- SCALED_PRESSURE2 (Bar30) depth; imu psi/phi/theta/r <- ATTITUDE;
+  motion_capture x/y/z/psi <- VISION_POSITION_ESTIMATE (or LOCAL_POSITION_NED for x/y/z).
+  The thruster wrench [Z, N] comes from SERVO_OUTPUT_RAW through the vehicle's thruster
+  curves and configuration matrix.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rovlab.allocation.geometry import configuration_matrix
+from rovlab.interfaces.mavlink.units import STANDARD_ATMOSPHERE_HPA, depth_from_pressure
+from rovlab.models.thrusters import ThrusterBank
+from rovlab.params.vehicle import Vehicle
+
+Record = tuple[float, str, dict[str, Any]]  # (UNIX time [s], MAVLink message type, fields)
+MAVLINK_PREFIX = "/mavlink/"
+
+
+class LogError(ValueError):
+    """A log that cannot be read or holds no usable telemetry (message names the file)."""
+
+
+# --------------------------------------------------------------------------------------------
+# Recording
+# --------------------------------------------------------------------------------------------
+
+class TelemetryRecorder:
+    """MAVLink messages and rovlab messages into one MCAP file (rovlab.io.timeseries.McapStream)."""
+
+    def __init__(self, path: str | Path, *, metadata: Mapping[str, str] | None = None) -> None:
+        from rovlab.io.timeseries import McapStream
+
+        self.stream = McapStream(path, metadata={"recorded_by": "rovlab mavlink", **(metadata or {})})
+
+    @property
+    def path(self) -> Path:
+        return self.stream.path
+
+    def mavlink(self, msg: Any, time_unix_s: float) -> None:
+        """A pymavlink message, as its fields in MAVLink units."""
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            return
+        fields = {k: v for k, v in msg.to_dict().items() if k != "mavpackettype"}
+        fields["_sysid"] = msg.get_srcSystem()
+        fields["_compid"] = msg.get_srcComponent()
+        self.stream.write(MAVLINK_PREFIX + kind, time_unix_s, fields)
+
+    def rovlab(self, topic: str, time_unix_s: float, message: Mapping[str, Any]) -> None:
+        self.stream.write(topic, time_unix_s, message)
+
+    def close(self) -> None:
+        self.stream.close()
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+
+def read_records(path: str | Path) -> list[Record]:
+    """The MAVLink messages of a .tlog or of an MCAP recorded by :class:`TelemetryRecorder`."""
+    path = Path(path)
+    if not path.is_file():
+        raise LogError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix == ".tlog":
+        records = _read_tlog(path)
+    elif suffix == ".mcap":
+        try:
+            from rovlab.io.timeseries import read_mcap_json
+
+            records = [(t, topic[len(MAVLINK_PREFIX):], msg)
+                       for topic, t, msg in read_mcap_json(path, prefix=MAVLINK_PREFIX)]
+        except RuntimeError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the mcap reader raises its own types on a bad file
+            raise LogError(f"{path}: not a readable MCAP file ({exc})") from None
+    else:
+        raise LogError(f"{path}: expected a .tlog (MAVLink telemetry log) or an .mcap recorded by rovlab mavlink")
+    if not records:
+        raise LogError(f"{path}: no MAVLink messages in it")
+    return records
+
+
+def _read_tlog(path: Path) -> list[Record]:
+    from rovlab.interfaces.mavlink import mavutil
+
+    mlog = mavutil().mavlink_connection(str(path), dialect="ardupilotmega")
+    out: list[Record] = []
+    try:
+        while True:
+            try:
+                msg = mlog.recv_match()
+            except Exception:  # noqa: BLE001 - a corrupt tail ends the log
+                break
+            if msg is None:
+                break
+            kind = msg.get_type()
+            if kind == "BAD_DATA":
+                continue
+            fields = {k: v for k, v in msg.to_dict().items() if k != "mavpackettype"}
+            fields["_sysid"] = msg.get_srcSystem()
+            fields["_compid"] = msg.get_srcComponent()
+            out.append((float(getattr(msg, "_timestamp", 0.0)), kind, fields))
+    finally:
+        mlog.close()
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Telemetry -> measurement channels and thruster wrench (SI)
+# --------------------------------------------------------------------------------------------
+
+@dataclass
+class SampleMap:
+    """Turns MAVLink telemetry into samples of the filter's channels and the thruster wrench."""
+
+    vehicle: Vehicle
+    channels: tuple[Any, ...]  # rovlab.estimation.model.Channel (column, kind, quantity)
+    surface_hpa: float = STANDARD_ATMOSPHERE_HPA
+    bank: ThrusterBank = field(init=False)
+    B: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.bank = ThrusterBank.from_vehicle(self.vehicle)
+        self.B = configuration_matrix(self.vehicle)
+
+    def samples(self, kind: str, fields: Mapping[str, Any]) -> dict[str, float]:
+        """Channel column -> value [SI] that this message gives (finite values only)."""
+        out: dict[str, float] = {}
+        for c in self.channels:
+            v = self._value(c.kind, c.quantity, kind, fields)
+            if v is not None and math.isfinite(v):
+                out[c.column] = v
+        return out
+
+    def _value(self, sensor: str, quantity: str, kind: str, f: Mapping[str, Any]) -> float | None:
+        if sensor == "pressure" and quantity == "z" and kind == "SCALED_PRESSURE2":
+            return depth_from_pressure(_num(f.get("press_abs")), water_density=self.vehicle.water_density,
+                                       gravity=self.vehicle.gravity, surface_hpa=self.surface_hpa)
+        if sensor == "imu" and kind == "ATTITUDE":
+            key = {"psi": "yaw", "phi": "roll", "theta": "pitch", "r": "yawspeed"}.get(quantity)
+            return _num(f.get(key)) if key else None
+        if sensor == "motion_capture":
+            if kind == "VISION_POSITION_ESTIMATE":
+                key = {"x": "x", "y": "y", "z": "z", "psi": "yaw", "phi": "roll", "theta": "pitch"}.get(quantity)
+                return _num(f.get(key)) if key else None
+            if kind == "LOCAL_POSITION_NED" and quantity in ("x", "y", "z"):
+                return _num(f.get(quantity))
+        return None
+
+    def wrench(self, fields: Mapping[str, Any]) -> np.ndarray | None:
+        """[X, Y, Z, N] [N, N m] the thrusters give for a SERVO_OUTPUT_RAW (servo i = thruster i);
+        None if a pulse is missing or not a number."""
+        n = len(self.bank.names)
+        pwm = np.array([_num(fields.get(f"servo{i + 1}_raw")) for i in range(n)])
+        if not np.all(np.isfinite(pwm)) or np.any(pwm <= 0):
+            return None
+        tau6 = self.B @ self.bank.force(pwm, compiled=False)
+        return tau6[[0, 1, 2, 5]]
+
+
+def _num(v: Any) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def vehicle_sysid(records: Iterable[Record]) -> int | None:
+    """System id of the first HEARTBEAT from a submarine (MAV_TYPE_SUBMARINE = 12), if any."""
+    for _t, kind, f in records:
+        if kind == "HEARTBEAT" and f.get("type") == 12:
+            return int(f.get("_sysid", 0))
+    return None
+
+
+def surface_pressure_hpa(records: Iterable[Record]) -> float | None:
+    """BARO2_GND_PRESS [Pa] as the vehicle reported it (PARAM_VALUE), in hPa."""
+    for _t, kind, f in records:
+        if kind == "PARAM_VALUE" and str(f.get("param_id", "")).strip("\x00") == "BARO2_GND_PRESS":
+            v = _num(f.get("param_value"))
+            if math.isfinite(v) and v > 0:
+                return v / 100.0
+    return None
+
+
+def filter_columns(records: list[Record], vehicle: Vehicle, channels: tuple[Any, ...], h: float, *,
+                   surface_hpa: float | None = None, file: str = "<log>") -> dict[str, np.ndarray]:
+    """The columns ``rovlab filter`` reads (time_s, tau_Z, tau_N and one per channel) on a grid of
+    the filter's sample time h: each row holds the latest sample of each channel within its
+    period (NaN when none) and the thruster wrench held since the last SERVO_OUTPUT_RAW."""
+    sysid = vehicle_sysid(records)
+    mine = [r for r in records if sysid is None or r[2].get("_sysid", sysid) == sysid]
+    if surface_hpa is None:
+        surface_hpa = surface_pressure_hpa(mine) or STANDARD_ATMOSPHERE_HPA
+    smap = SampleMap(vehicle, channels, surface_hpa=surface_hpa)
+    times = [t for t, kind, _ in mine if kind in ("SCALED_PRESSURE2", "ATTITUDE", "SERVO_OUTPUT_RAW",
+                                                  "VISION_POSITION_ESTIMATE", "LOCAL_POSITION_NED")]
+    if not times:
+        raise LogError(f"{file}: no telemetry the filter can use (SCALED_PRESSURE2, ATTITUDE, SERVO_OUTPUT_RAW, "
+                       "VISION_POSITION_ESTIMATE, LOCAL_POSITION_NED)")
+    t0 = min(times)
+    rows = int(math.floor((max(times) - t0) / h + 0.5)) + 1
+    cols: dict[str, np.ndarray] = {"time_s": np.arange(rows) * h, "tau_Z": np.full(rows, np.nan),
+                                   "tau_N": np.full(rows, np.nan)}
+    for c in channels:
+        cols[c.column] = np.full(rows, np.nan)
+    used = 0
+    for t, kind, f in sorted(mine, key=lambda r: r[0]):
+        if t < t0:
+            continue
+        k = min(int(math.floor((t - t0) / h + 0.5)), rows - 1)
+        if kind == "SERVO_OUTPUT_RAW":
+            tau = smap.wrench(f)
+            if tau is not None:
+                cols["tau_Z"][k], cols["tau_N"][k] = tau[2], tau[3]
+                used += 1
+            continue
+        for column, value in smap.samples(kind, f).items():
+            cols[column][k] = value
+            used += 1
+    if not used:
+        raise LogError(f"{file}: none of its messages gives a sample of {', '.join(c.column for c in channels)}")
+    for key in ("tau_Z", "tau_N"):  # zero-order hold; no thrust before the first SERVO_OUTPUT_RAW
+        col = cols[key]
+        last = 0.0
+        for i in range(rows):
+            if math.isnan(col[i]):
+                col[i] = last
+            else:
+                last = col[i]
+    return cols
+
+
+def write_filter_log(log: str | Path, vehicle: Vehicle, model: Any, out: str | Path, *,
+                     surface_hpa: float | None = None) -> dict[str, Any]:
+    """Convert a .tlog/.mcap into the CSV ``rovlab filter`` reads (model: the filter model, for its
+    channels and sample time); returns a summary (rows, samples per channel)."""
+    from rovlab.io.logs import write_csv
+
+    records = read_records(log)
+    cols = filter_columns(records, vehicle, tuple(model.channels), float(model.h), surface_hpa=surface_hpa,
+                          file=str(log))
+    write_csv(out, cols, comments=[f"converted from {log} by rovlab mavlink for vehicle {vehicle.name}",
+                                   "units: SI (s, m, rad, rad/s, N, N m); empty = no sample in that period"],
+              exact=("time_s",))
+    return {"rows": int(cols["time_s"].size), "messages": len(records),
+            "samples": {c.column: int(np.count_nonzero(~np.isnan(cols[c.column]))) for c in model.channels}}

@@ -1,0 +1,406 @@
+"""``rovlab mavlink sim``: a MAVLink endpoint that behaves like an ArduSub vehicle, on rovlab's
+plant model (rovlab.sim.vehicle.VehicleSimulation).
+
+What it does, as a stock BlueROV2 running ArduSub would (docs/mavlink.md has the details):
+
+* sends HEARTBEAT (MAV_TYPE_SUBMARINE, ArduPilot autopilot, armed flag, custom_mode = the
+  ArduSub mode number), ATTITUDE (rad, rad/s), SCALED_PRESSURE2 (the external Bar30: press_abs
+  in hPa from the pressure sensor's depth and the water density), VFR_HUD (heading in degrees,
+  alt = -depth), SYS_STATUS, SERVO_OUTPUT_RAW (one servo per thruster in the vehicle file's order,
+  in us) and, with ``local_position``, LOCAL_POSITION_NED (as with a positioning system);
+* arms and disarms on COMMAND_LONG MAV_CMD_COMPONENT_ARM_DISARM and changes mode on
+  MAV_CMD_DO_SET_MODE or SET_MODE, each answered by COMMAND_ACK; MANUAL and STABILIZE are
+  simulated (identical here: roll and pitch are not modelled), other modes are refused;
+  MAV_CMD_SET_MESSAGE_INTERVAL sets the rate of a streamed message; AUTOPILOT_VERSION is sent on
+  request and a mission list request gets an empty list (what ground stations ask at connect);
+* answers the parameter protocol (PARAM_REQUEST_LIST, PARAM_REQUEST_READ, PARAM_SET ->
+  PARAM_VALUE) for the parameters of rovlab.interfaces.mavlink.ardusub.SIM_PARAMETERS;
+* obeys MANUAL_CONTROL and RC_CHANNELS_OVERRIDE only from SYSID_MYGCS (as ArduSub does), turns
+  them into normalised inputs with the joystick gains (rovlab.interfaces.mavlink.units) and mixes
+  them onto the thrusters (rovlab.allocation.mixing.Mixer: ArduSub-style factors derived from
+  the vehicle's geometry, linear output -> PWM), while armed;
+* pilot-input failsafe: armed and no pilot input for FS_PILOT_TIMEOUT s -> neutral inputs (and
+  with FS_PILOT_INPUT = 2, disarm).
+
+Anything malformed (bad CRC, unknown message, out-of-range joystick values, a bad PARAM_SET) is
+counted and answered where MAVLink has an answer; the endpoint keeps running.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from rovlab.allocation.mixing import Mixer
+from rovlab.interfaces.mavlink import dialect, mavutil
+from rovlab.interfaces.mavlink.ardusub import (
+    FS_PILOT_DISABLED,
+    FS_PILOT_DISARM,
+    MODE_NAMES,
+    MODES,
+    Parameters,
+)
+from rovlab.interfaces.mavlink.units import (
+    RC_CHANNEL,
+    cdeg_c,
+    heading_deg,
+    input_from_rc_pulse,
+    inputs_from_manual_control,
+    pressure_hpa,
+)
+from rovlab.params.vehicle import Vehicle
+from rovlab.sim.vehicle import VehicleSimulation
+
+SIMULATED_MODES = (MODES["MANUAL"], MODES["STABILIZE"])
+_AXES = ("forward", "lateral", "throttle", "yaw")
+_ARM_FORCE_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2 that forces arming/disarming
+
+
+class ArduSubSim:
+    """A simulated ArduSub vehicle on one MAVLink connection. Drive it with :meth:`run` (or call
+    :meth:`step` from your own loop); not thread-safe apart from :meth:`stop`."""
+
+    def __init__(self, vehicle: Vehicle, *, connect: str = "udpout:127.0.0.1:14550", seed: int = 0,
+                 depth_m: float = 0.0, heading_rad: float = 0.0, local_position: bool = False,
+                 attitude_hz: float = 25.0, log: Callable[[str], None] | None = None,
+                 sim: VehicleSimulation | None = None) -> None:
+        mu = mavutil()
+        self.mav = dialect()
+        self.vehicle = vehicle
+        self.sim = sim if sim is not None else VehicleSimulation(vehicle, depth_m=depth_m, heading_rad=heading_rad,
+                                                                 seed=seed)
+        self.mixer = Mixer.from_vehicle(vehicle)
+        n = len(vehicle.thrusters)
+        if n > 16:
+            raise ValueError(f"SERVO_OUTPUT_RAW carries 16 outputs; vehicle {vehicle.name!r} has {n} thrusters")
+        pwm_min = min(t.pwm_min_us for t in vehicle.thrusters)
+        pwm_max = max(t.pwm_max_us for t in vehicle.thrusters)
+        self.params = Parameters(BARO_SPEC_GRAV=vehicle.water_density / 1000.0, MOT_PWM_MIN=pwm_min,
+                                 MOT_PWM_MAX=pwm_max, FRAME_CONFIG=2 if n == 8 else 7)
+        self.sysid = int(self.params["SYSID_THISMAV"])
+        self.conn = mu.mavlink_connection(connect, source_system=self.sysid, source_component=1,
+                                          dialect="ardupilotmega")
+        self.connect = connect
+        self.local_position = local_position
+        self.log = log or (lambda text: None)
+        self.armed = False
+        self.mode = MODES["MANUAL"]
+        self.inputs = np.zeros(4)  # normalised pilot inputs [forward, lateral, throttle, yaw]
+        self.last_pilot: float | None = None
+        self.failsafe = False
+        self.counts: dict[str, int] = {"received": 0, "bad_data": 0, "ignored_sysid": 0, "clipped": 0,
+                                       "refused": 0, "errors": 0}
+        self._stop = threading.Event()
+        self._t0: float | None = None
+        pressure = next((s for s in vehicle.sensors if s.kind == "pressure"), None)
+        rate = pressure.rate_hz if pressure is not None else 10.0
+        self._periods = {"heartbeat": 1.0, "attitude": 1.0 / attitude_hz, "pressure": 1.0 / rate,
+                         "sys_status": 1.0, "servo": 0.1, "vfr_hud": 0.2, "local_position": 0.1}
+        self._default_periods = dict(self._periods)
+        self._due = dict.fromkeys(self._periods, 0.0)
+        self._warned: set[str] = set()
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def stop(self) -> None:
+        """Ask :meth:`run` to return (thread-safe; also from a signal handler)."""
+        self._stop.set()
+
+    def close(self) -> None:
+        try:
+            self.conn.close()
+        except OSError:  # pragma: no cover - already closed
+            pass
+
+    def run(self, *, duration_s: float | None = None, tick_s: float = 0.005) -> None:
+        """Serve until :meth:`stop` (or for duration_s of wall-clock time)."""
+        start = time.monotonic()
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if duration_s is not None and now - start >= duration_s:
+                break
+            self.step(now)
+            self._stop.wait(tick_s)
+
+    def step(self, now: float) -> None:
+        """Read what arrived, apply the failsafe, advance the plant to ``now`` and send what is due."""
+        if self._t0 is None:
+            self._t0 = now
+        for _ in range(1000):  # bounded: a flood cannot stall the plant
+            try:
+                msg = self.conn.recv_msg()
+            except Exception as exc:  # noqa: BLE001 - a broken packet must not stop the vehicle
+                self.counts["errors"] += 1
+                self._warn_once("recv", f"receive error: {exc}")
+                break
+            if msg is None:
+                break
+            try:
+                self._handle(msg, now)
+            except Exception as exc:  # noqa: BLE001 - the same for a handler tripping on odd values
+                self.counts["errors"] += 1
+                self._warn_once(f"handle-{msg.get_type()}", f"could not handle {msg.get_type()}: {exc}")
+        self._failsafe(now)
+        self._actuate()
+        self.sim.advance(now - self._t0 - self.sim.time)
+        self._telemetry(now)
+
+    # -- incoming ----------------------------------------------------------------------------
+    def _handle(self, msg: Any, now: float) -> None:
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            self.counts["bad_data"] += 1
+            return
+        self.counts["received"] += 1
+        handler = _HANDLERS.get(kind)
+        if handler is not None:
+            handler(self, msg, now)
+
+    def _from_my_gcs(self, msg: Any) -> bool:
+        if msg.get_srcSystem() == int(self.params["SYSID_MYGCS"]):
+            return True
+        self.counts["ignored_sysid"] += 1
+        self._warn_once(f"sysid-{msg.get_srcSystem()}",
+                        f"ignoring {msg.get_type()} from system {msg.get_srcSystem()}: "
+                        f"SYSID_MYGCS is {int(self.params['SYSID_MYGCS'])}")
+        return False
+
+    def _on_manual_control(self, msg: Any, now: float) -> None:
+        if msg.target != self.sysid or not self._from_my_gcs(msg):
+            return
+        raw = (msg.x, msg.y, msg.z, msg.r)
+        x, y, r = (float(np.clip(v, -1000, 1000)) for v in (msg.x, msg.y, msg.r))
+        z = float(np.clip(msg.z, 0, 1000))
+        if (x, y, z, r) != tuple(float(v) for v in raw):
+            self.counts["clipped"] += 1
+            self._warn_once("mc-range", f"MANUAL_CONTROL out of range {raw}: clipped to x, y, r in -1000..1000, "
+                                        "z in 0..1000")
+        self.inputs = inputs_from_manual_control(x, y, z, r, gain=self.params["JS_GAIN_DEFAULT"],
+                                                 throttle_gain=self.params["JS_THR_GAIN"])
+        self._pilot_input(now)
+
+    def _on_rc_override(self, msg: Any, now: float) -> None:
+        if msg.target_system != self.sysid or not self._from_my_gcs(msg):
+            return
+        touched = False
+        for j, axis in enumerate(_AXES):
+            pulse = getattr(msg, f"chan{RC_CHANNEL[axis]}_raw")
+            if pulse in (0, 65535):  # 0 = release, UINT16_MAX = leave as it is
+                continue
+            self.inputs[j] = input_from_rc_pulse(pulse)
+            touched = True
+        if touched:
+            self._pilot_input(now)
+
+    def _pilot_input(self, now: float) -> None:
+        self.last_pilot = now
+        if self.failsafe:
+            self.failsafe = False
+            self._status("pilot input back", severity=self.mav.MAV_SEVERITY_INFO)
+
+    def _on_command_long(self, msg: Any, now: float) -> None:
+        if msg.target_system not in (0, self.sysid):
+            return
+        mav = self.mav
+        result = mav.MAV_RESULT_UNSUPPORTED
+        send_version = False
+        if msg.command == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            result = self._arm(msg.param1, now)
+        elif msg.command == mav.MAV_CMD_DO_SET_MODE:
+            result = self._set_mode(msg.param2)
+        elif msg.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
+            result = self._set_interval(msg.param1, msg.param2)
+        elif msg.command in (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            wanted = msg.param1 if msg.command == mav.MAV_CMD_REQUEST_MESSAGE else mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            send_version = wanted == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION
+            result = mav.MAV_RESULT_ACCEPTED if send_version else mav.MAV_RESULT_UNSUPPORTED
+        self.conn.mav.command_ack_send(msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
+        if send_version:
+            caps = mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+            self.conn.mav.autopilot_version_send(caps, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
+
+    def _set_interval(self, msg_id: float, interval_us: float) -> int:
+        """MAV_CMD_SET_MESSAGE_INTERVAL for the streamed messages: interval in us, 0 = default,
+        -1 = off (limited to 1 .. 100 Hz)."""
+        key = _STREAM_KEYS.get(int(msg_id)) if math.isfinite(msg_id) else None
+        if key is None or not math.isfinite(interval_us):
+            self.counts["refused"] += 1
+            return self.mav.MAV_RESULT_DENIED
+        if interval_us < 0:
+            self._periods[key] = math.inf
+        elif interval_us == 0:
+            self._periods[key] = self._default_periods[key]
+        else:
+            self._periods[key] = min(max(interval_us * 1e-6, 0.01), 1.0)
+        self._due[key] = 0.0
+        return self.mav.MAV_RESULT_ACCEPTED
+
+    def _on_mission_request_list(self, msg: Any, now: float) -> None:
+        if msg.target_system in (0, self.sysid):  # no missions in the simulator: an empty list
+            self.conn.mav.mission_count_send(msg.get_srcSystem(), msg.get_srcComponent(), 0,
+                                             getattr(msg, "mission_type", 0))
+
+    def _arm(self, param1: float, now: float) -> int:
+        mav = self.mav
+        if param1 == 1.0:
+            if self.mode not in SIMULATED_MODES:
+                self._status(f"arming refused: mode {MODE_NAMES.get(self.mode, self.mode)} is not simulated")
+                return mav.MAV_RESULT_DENIED
+            if not self.armed:
+                self.armed = True
+                self.last_pilot = now  # the failsafe counts from arming
+                self.inputs[:] = 0.0
+                self._status("Arming motors", severity=mav.MAV_SEVERITY_INFO)
+            return mav.MAV_RESULT_ACCEPTED
+        if param1 == 0.0:
+            if self.armed:
+                self.armed = False
+                self._status("Disarming motors", severity=mav.MAV_SEVERITY_INFO)
+            return mav.MAV_RESULT_ACCEPTED
+        self.counts["refused"] += 1
+        return mav.MAV_RESULT_DENIED
+
+    def _set_mode(self, custom_mode: float) -> int:
+        mode = int(custom_mode) if math.isfinite(custom_mode) else -1
+        if mode not in SIMULATED_MODES:
+            self.counts["refused"] += 1
+            self._status(f"mode {MODE_NAMES.get(mode, mode)} not simulated (MANUAL, STABILIZE are)")
+            return self.mav.MAV_RESULT_DENIED
+        self.mode = mode
+        return self.mav.MAV_RESULT_ACCEPTED
+
+    def _on_set_mode(self, msg: Any, now: float) -> None:
+        if msg.target_system == self.sysid:
+            self._set_mode(float(msg.custom_mode))
+
+    def _on_param_request_list(self, msg: Any, now: float) -> None:
+        if msg.target_system not in (0, self.sysid):
+            return
+        for spec in self.params.specs:
+            self._send_param(spec.name)
+
+    def _on_param_request_read(self, msg: Any, now: float) -> None:
+        if msg.target_system not in (0, self.sysid):
+            return
+        if msg.param_index >= 0:
+            if msg.param_index < len(self.params):
+                self._send_param(self.params.specs[msg.param_index].name)
+            return
+        name = _param_name(msg.param_id)
+        if self.params.spec(name) is not None:
+            self._send_param(name)
+        else:
+            self._status(f"no parameter {name!r}")
+
+    def _on_param_set(self, msg: Any, now: float) -> None:
+        if msg.target_system not in (0, self.sysid):
+            return
+        name = _param_name(msg.param_id)
+        why = self.params.set(name, msg.param_value)
+        if why is not None:
+            self.counts["refused"] += 1
+            self._status(f"PARAM_SET refused: {why}")
+        if self.params.spec(name) is not None:
+            self._send_param(name)  # the value now in force (unchanged if refused), as ArduPilot does
+
+    # -- outgoing ----------------------------------------------------------------------------
+    def _send_param(self, name: str) -> None:
+        spec = self.params.spec(name)
+        assert spec is not None
+        self.conn.mav.param_value_send(name.encode("ascii"), float(self.params[name]), spec.mav_type,
+                                       len(self.params), self.params.index(name))
+
+    def _status(self, text: str, *, severity: int | None = None) -> None:
+        sev = self.mav.MAV_SEVERITY_WARNING if severity is None else severity
+        self.log(text)
+        self.conn.mav.statustext_send(sev, text[:50].encode("ascii", "replace"))
+
+    def _warn_once(self, key: str, text: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            self._status(text)
+
+    def _failsafe(self, now: float) -> None:
+        action = int(self.params["FS_PILOT_INPUT"])
+        if not self.armed or action == FS_PILOT_DISABLED or self.last_pilot is None or self.failsafe:
+            return
+        if now - self.last_pilot > self.params["FS_PILOT_TIMEOUT"]:
+            self.failsafe = True
+            self.inputs[:] = 0.0
+            self._status("Lost manual control", severity=self.mav.MAV_SEVERITY_CRITICAL)
+            if action == FS_PILOT_DISARM:
+                self.armed = False
+                self._status("Disarming motors (pilot input failsafe)")
+
+    def _actuate(self) -> None:
+        if self.armed and self.mode in SIMULATED_MODES:
+            self.sim.set_pwm(self.mixer.pwm_us(self.mixer.outputs(self.inputs)))
+        else:
+            self.sim.neutral()
+
+    def _telemetry(self, now: float) -> None:
+        due = [k for k, t in self._due.items() if now >= t]
+        for key in due:
+            self._due[key] = max(self._due[key] + self._periods[key], now)  # inf: the stream is off
+        if not due:
+            return
+        mav, out = self.mav, self.conn.mav
+        boot_ms = int((now - (self._t0 or now)) * 1000) & 0xFFFFFFFF
+        sim = self.sim
+        if "heartbeat" in due:
+            base = (mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+                    | mav.MAV_MODE_FLAG_STABILIZE_ENABLED | (mav.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0))
+            state = (mav.MAV_STATE_CRITICAL if self.failsafe
+                     else mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY)
+            out.heartbeat_send(mav.MAV_TYPE_SUBMARINE, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base, self.mode, state)
+        if "attitude" in due:
+            out.attitude_send(boot_ms, 0.0, 0.0, sim.heading_sample(), 0.0, 0.0, sim.yaw_rate_sample())
+        if "pressure" in due:
+            v = self.vehicle
+            p = pressure_hpa(sim.pressure_depth(), water_density=v.water_density, gravity=v.gravity,
+                             surface_hpa=self.params["BARO2_GND_PRESS"] / 100.0)
+            out.scaled_pressure2_send(boot_ms, p, p - self.params["BARO2_GND_PRESS"] / 100.0, cdeg_c(15.0))
+        if "vfr_hud" in due:
+            throttle = int(round(50.0 + 50.0 * self.inputs[2]))
+            out.vfr_hud_send(0.0, float(math.hypot(sim.x[4], sim.x[5])), heading_deg(sim.heading), throttle,
+                             -sim.depth, -float(sim.x[6]))
+        if "sys_status" in due:
+            bits = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+                    | mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+                    | mav.MAV_SYS_STATUS_AHRS)
+            out.sys_status_send(bits, bits, bits, 100, 16000, -1, -1, 0, 0, 0, 0, 0, 0)
+        if "servo" in due:
+            pwm = [int(round(p)) for p in sim.pwm_us] + [0] * (16 - sim.pwm_us.size)
+            out.servo_output_raw_send(int((now - (self._t0 or now)) * 1e6) & 0xFFFFFFFF, 0, *pwm)
+        if "local_position" in due and self.local_position:
+            c, s = math.cos(sim.x[3]), math.sin(sim.x[3])
+            vn = c * sim.x[4] - s * sim.x[5]
+            ve = s * sim.x[4] + c * sim.x[5]
+            out.local_position_ned_send(boot_ms, float(sim.x[0]), float(sim.x[1]), float(sim.x[2]), float(vn),
+                                        float(ve), float(sim.x[6]))
+
+
+def _param_name(raw: Any) -> str:
+    if isinstance(raw, bytes):
+        raw = raw.decode("ascii", "replace")
+    return str(raw).split("\x00", 1)[0].strip()
+
+
+_HANDLERS: dict[str, Callable[[ArduSubSim, Any, float], None]] = {
+    "MANUAL_CONTROL": ArduSubSim._on_manual_control,
+    "RC_CHANNELS_OVERRIDE": ArduSubSim._on_rc_override,
+    "COMMAND_LONG": ArduSubSim._on_command_long,
+    "SET_MODE": ArduSubSim._on_set_mode,
+    "PARAM_REQUEST_LIST": ArduSubSim._on_param_request_list,
+    "PARAM_REQUEST_READ": ArduSubSim._on_param_request_read,
+    "PARAM_SET": ArduSubSim._on_param_set,
+    "MISSION_REQUEST_LIST": ArduSubSim._on_mission_request_list,
+}
+
+# MAVLink message id -> telemetry stream (for MAV_CMD_SET_MESSAGE_INTERVAL)
+_STREAM_KEYS = {0: "heartbeat", 30: "attitude", 137: "pressure", 1: "sys_status", 36: "servo", 74: "vfr_hud",
+                32: "local_position"}
