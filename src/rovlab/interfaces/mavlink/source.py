@@ -76,7 +76,11 @@ class MavlinkSource:
     def reset(self) -> None:
         raise ValueError("a real vehicle cannot be reset from the HMI")
 
-    def set_reference(self, z: float | None = None, psi: float | None = None) -> None:
+    def set_reference(self, z: float | None = None, psi: float | None = None, *, x: float | None = None,
+                      y: float | None = None) -> None:
+        if x is not None or y is not None:
+            raise ValueError("the MAVLink bridge holds depth and heading: north/east set-points need the DP "
+                             "controller, which the bridge does not run")
         self.bridge.set_reference(z=z, psi=psi)
 
     def follow_schedule(self) -> None:

@@ -142,7 +142,11 @@ class Ros2Source:
     def reset(self) -> None:
         raise ValueError("a running vehicle cannot be reset from the HMI (restart its node)")
 
-    def set_reference(self, z: float | None = None, psi: float | None = None) -> None:
+    def set_reference(self, z: float | None = None, psi: float | None = None, *, x: float | None = None,
+                      y: float | None = None) -> None:
+        if x is not None or y is not None:
+            raise ValueError("this node holds depth and heading: north/east set-points need the DP controller, "
+                             "which the ROS nodes do not run yet")
         zr, pr = self.reference
         z = z if z is not None else zr
         psi = psi if psi is not None else pr
