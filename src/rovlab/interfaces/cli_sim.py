@@ -161,6 +161,12 @@ def _print_summary(rows: list[tuple[str, dict[str, Any]]]) -> None:
               f"{_fmt(m['settling_time_s'].get('psi')):>14s} {_fmt(drift, deg):>20s} {_fmt(nees):>9s}")
     print("('-': not settled to 2 % within the run -- the thesis's heading LQR is slow, time constant ~17 s;"
           " NEES/dof near 1 means the filter's covariance matches its errors)")
+    for name, m in rows:  # dynamic positioning: how well the reference model's path was followed
+        tr = m.get("tracking_rms")
+        if tr:
+            sat = (m.get("saturation") or {}).get("time_s")
+            print(f"{name}: tracking RMS x {_fmt(tr.get('x'))} m, y {_fmt(tr.get('y'))} m, z {_fmt(tr.get('z'))} m, "
+                  f"psi {_fmt(tr.get('psi'), deg)} deg; thrusters saturated {_fmt(sat)} s")
 
 
 _COMPARISONS = ("heave-buoyancy-step", "heave-payload", "heave-tether")
