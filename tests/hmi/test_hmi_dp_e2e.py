@@ -4,65 +4,20 @@ set-point fields and a live xy track, and a set-point typed on the page reaches 
 
 from __future__ import annotations
 
-import json
-import os
-import time
-import urllib.request
-from pathlib import Path
-
-import pytest
-
-CHROMIUM = Path("/usr/bin/chromium")
-ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "hmi"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-WAIT_MS = 20000
-
-
-def _reason() -> str | None:
-    if not CHROMIUM.exists():
-        return f"{CHROMIUM} is missing (install Debian's chromium: scripts/ensure-chromium.sh)"
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        return "playwright is not installed (pip install -e '.[dev]')"
-    return None
-
-
-if _reason() is not None:
-    if os.environ.get("CI"):
-        pytest.fail(f"CI must run the HMI browser tests: {_reason()}", pytrace=False)
-    pytest.skip(str(_reason()), allow_module_level=True)
-
-from playwright.sync_api import sync_playwright
-
 from rovlab.interfaces.hmi.server import ServerThread
 from rovlab.interfaces.hmi.session import Session
 
-
-def _state(server) -> dict:
-    with urllib.request.urlopen(server.url + "api/state", timeout=10) as r:
-        return json.load(r)
+WAIT_MS = 20000
 
 
-def _wait(predicate, what: str, timeout: float = WAIT_MS / 1000):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
-def test_dp_set_points_and_the_live_xy_track(tmp_path):
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+def test_dp_set_points_and_the_live_xy_track(tmp_path, browser, artifacts, hmi_state, hmi_wait):
     session = Session.simulation("dp-square", out_dir=tmp_path / "out", speed=10.0, running=True)
     server = ServerThread(session).start()
     errors: list[str] = []
     try:
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
-            page = browser.new_context(viewport={"width": 1600, "height": 1000}).new_page()
+        context = browser.new_context(viewport={"width": 1600, "height": 1000})
+        try:
+            page = context.new_page()
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
             page.goto(server.url, wait_until="load")
@@ -85,17 +40,18 @@ def test_dp_set_points_and_the_live_xy_track(tmp_path):
             page.evaluate("""() => { document.querySelector('#ref-north').value = '1.25';
                 document.querySelector('#ref-east').value = '-0.75';
                 document.querySelector('#ref-set').click(); }""")
-            _wait(lambda: _state(server)["reference"]["north_m"] == 1.25 and _state(server)["reference"]["east_m"] == -0.75,
-                  "the north/east set-point in the loop")
-            assert _state(server)["reference"]["schedule"] is False
+            hmi_wait(lambda: (hmi_state(server)["reference"]["north_m"], hmi_state(server)["reference"]["east_m"])
+                     == (1.25, -0.75), "the north/east set-point in the loop")
+            assert hmi_state(server)["reference"]["schedule"] is False
             # a bad value is refused with a message naming the field
             page.fill("#ref-north", "far")
             page.click("#ref-set")
             page.wait_for_function("() => document.querySelector('#ref-msg').textContent.includes('north_m')",
                                    timeout=WAIT_MS)
             assert "bad" in (page.get_attribute("#ref-north", "class") or "")
-            page.screenshot(path=str(ARTIFACTS / "dp-track.png"))
-            browser.close()
+            page.screenshot(path=str(artifacts / "dp-track.png"))
+        finally:
+            context.close()
     finally:
         server.stop()
     assert errors == []

@@ -8,51 +8,18 @@ Screenshots go to test-artifacts/hmi/ (kept by CI as artifacts of the test outpu
 from __future__ import annotations
 
 import json
-import os
 import time
 import urllib.request
 from pathlib import Path
 
 import pytest
 
-CHROMIUM = Path("/usr/bin/chromium")
-ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "hmi"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-WAIT_MS = 20000
-
-
-def _missing_reason() -> str | None:
-    if not CHROMIUM.exists():
-        return f"{CHROMIUM} is missing (install Debian's chromium: scripts/ensure-chromium.sh)"
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        return "playwright is not installed (pip install -e '.[dev]')"
-    return None
-
-
-_REASON = _missing_reason()
-if _REASON is not None:
-    if os.environ.get("CI"):
-        pytest.fail(f"CI must run the HMI browser tests: {_REASON}", pytrace=False)
-    pytest.skip(_REASON, allow_module_level=True)
-
-from playwright.sync_api import sync_playwright
-
 from rovlab.interfaces.hmi.server import ServerThread
 from rovlab.interfaces.hmi.session import Session
 from rovlab.params.vehicle import load_vehicle
 
-
-@pytest.fixture(scope="module")
-def browser():
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    # Playwright gives every launch a fresh, empty profile (its own --user-data-dir)
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "hmi"  # as conftest's: the Page helper saves here
+WAIT_MS = 20000
 
 
 def _serve(tmp_path, **kwargs):
