@@ -38,7 +38,7 @@ from rovlab.allocation.mixing import Mixer
 from rovlab.interfaces.mavlink import dialect, mavutil
 from rovlab.interfaces.mavlink.ardusub import MODES
 from rovlab.interfaces.mavlink.logs import SampleMap, TelemetryRecorder
-from rovlab.interfaces.mavlink.units import RC_CHANNEL, manual_control_from_inputs, rc_pulse_from_input
+from rovlab.interfaces.mavlink.units import RC_CHANNEL, drain, manual_control_from_inputs, rc_pulse_from_input
 from rovlab.interfaces.node.core import NodeCore
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
@@ -167,20 +167,7 @@ class MavlinkBridge:
     def step(self, now: float) -> None:
         """Read what arrived, step the node core, send what is due."""
         wall = time.time()
-        for _ in range(1000):  # bounded: a flood cannot starve the command loop
-            try:
-                msg = self.conn.recv_msg()
-            except Exception as exc:  # noqa: BLE001 - a broken packet must not stop the bridge
-                self.counts["errors"] += 1
-                self._warn_once("recv", f"receive error: {exc}")
-                break
-            if msg is None:
-                break
-            try:
-                self._handle(msg, now, wall)
-            except Exception as exc:  # noqa: BLE001 - nor a message with odd values
-                self.counts["errors"] += 1
-                self._warn_once(f"handle-{msg.get_type()}", f"could not handle {msg.get_type()}: {exc}")
+        drain(self.conn, lambda msg: self._handle(msg, now, wall), self.counts, self._warn_once)  # bounded per call
         for out in self.core.tick(now):
             msgs = out.messages(outputs=("Z", "N"))
             self._queue.extend(msgs)

@@ -17,6 +17,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -87,3 +89,25 @@ def input_from_rc_pulse(pulse_us: float) -> float:
 
 def rc_pulse_from_input(u: float) -> int:
     return int(round(RC_NEUTRAL_US + RC_HALF_RANGE_US * float(np.clip(u, -1.0, 1.0))))
+
+
+def drain(conn: Any, handle: Callable[[Any], None], counts: dict[str, int],
+          warn_once: Callable[[str, str], None], limit: int = 1000) -> None:
+    """Read what arrived on a pymavlink connection and hand each message to ``handle``, at most
+    ``limit`` per call (a flood cannot starve the caller's loop). A broken packet or a handler
+    tripping on odd values is counted in ``counts["errors"]`` and reported once per kind; the
+    caller keeps running."""
+    for _ in range(limit):
+        try:
+            msg = conn.recv_msg()
+        except Exception as exc:  # noqa: BLE001 - a broken packet must not stop the endpoint
+            counts["errors"] += 1
+            warn_once("recv", f"receive error: {exc}")
+            return
+        if msg is None:
+            return
+        try:
+            handle(msg)
+        except Exception as exc:  # noqa: BLE001 - nor a message with odd values
+            counts["errors"] += 1
+            warn_once(f"handle-{msg.get_type()}", f"could not handle {msg.get_type()}: {exc}")

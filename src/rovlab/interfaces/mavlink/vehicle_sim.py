@@ -48,6 +48,7 @@ from rovlab.interfaces.mavlink.ardusub import (
 from rovlab.interfaces.mavlink.units import (
     RC_CHANNEL,
     cdeg_c,
+    drain,
     heading_deg,
     input_from_rc_pulse,
     inputs_from_manual_control,
@@ -130,20 +131,7 @@ class ArduSubSim:
         """Read what arrived, apply the failsafe, advance the plant to ``now`` and send what is due."""
         if self._t0 is None:
             self._t0 = now
-        for _ in range(1000):  # bounded: a flood cannot stall the plant
-            try:
-                msg = self.conn.recv_msg()
-            except Exception as exc:  # noqa: BLE001 - a broken packet must not stop the vehicle
-                self.counts["errors"] += 1
-                self._warn_once("recv", f"receive error: {exc}")
-                break
-            if msg is None:
-                break
-            try:
-                self._handle(msg, now)
-            except Exception as exc:  # noqa: BLE001 - the same for a handler tripping on odd values
-                self.counts["errors"] += 1
-                self._warn_once(f"handle-{msg.get_type()}", f"could not handle {msg.get_type()}: {exc}")
+        drain(self.conn, lambda msg: self._handle(msg, now), self.counts, self._warn_once)  # bounded per call
         self._failsafe(now)
         self._actuate()
         self.sim.advance(now - self._t0 - self.sim.time)
