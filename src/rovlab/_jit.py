@@ -73,3 +73,154 @@ def use_user_cache_folder() -> None:
     config = sys.modules.get("numba.core.config")
     if config is not None:
         config.reload_config()
+
+
+# --------------------------------------------------------------------------------------------
+# The first run of a loop: interpret it, or compile it (and say so)
+# --------------------------------------------------------------------------------------------
+#
+# The simulator's loop is compiled per combination of components (plant, estimator, controller)
+# and cached on disk; compiling one takes a minute or more on a 2-core machine, while the same
+# loop run by the Python interpreter (NUMBA_DISABLE_JIT: numba's decorators return the plain
+# functions) does a 60 s case study in well under a second, with the same numbers. So the first
+# run of a short scenario is interpreted while a low-priority background process compiles the
+# loop for the next runs; long runs and Monte Carlo compile in the foreground after saying so.
+# A marker file per combination in the cache folder says that its loop is in numba's cache (the
+# folder is keyed on rovlab's sources, so an edit or a reinstall starts without markers).
+
+JIT_MODES = ("auto", "compile", "interpret")
+
+
+def loop_key(plant: str, estimator: str, controller: str) -> str:
+    """The name of one combination of components (one compiled loop), e.g. "process-kf-lqg"."""
+    return f"{plant}-{estimator}-{controller}"
+
+
+def jit_mode() -> str:
+    """ROVLAB_JIT: auto (default), compile (always compile) or interpret (never compile)."""
+    import os
+
+    mode = os.environ.get("ROVLAB_JIT", "auto").strip().lower() or "auto"
+    if mode not in JIT_MODES:
+        raise ValueError(f"ROVLAB_JIT={os.environ['ROVLAB_JIT']!r}: expected one of {', '.join(JIT_MODES)}")
+    return mode
+
+
+def _ready_folder():
+    import os
+    from pathlib import Path
+
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    return Path(cache) / "rovlab-ready" if cache else None
+
+
+def is_compiled(key: str) -> bool:
+    """Whether the loop for this combination of components is in numba's disk cache."""
+    folder = _ready_folder()
+    return folder is not None and (folder / f"{key}.json").is_file()
+
+
+def mark_compiled(key: str, seconds: float) -> None:
+    """Record that the loop for ``key`` is cached, and how long compiling it took."""
+    import json
+
+    folder = _ready_folder()
+    if folder is None or (folder / f"{key}.json").is_file():
+        return
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = folder / f".{key}.json.tmp"
+        tmp.write_text(json.dumps({"key": key, "compile_seconds": round(seconds, 1)}))
+        tmp.replace(folder / f"{key}.json")
+    except OSError:
+        pass  # a read-only cache: the next run compiles again, nothing is lost
+
+
+def compile_estimate(key: str) -> float | None:
+    """Seconds the loop for ``key`` took to compile here before (an older cache folder of this
+    machine: rovlab's sources changed since), or None if never."""
+    import json
+
+    folder = _ready_folder()
+    if folder is None:
+        return None
+    times = []
+    for marker in folder.parent.parent.glob(f"*/rovlab-ready/{key}.json"):
+        try:
+            times.append((marker.stat().st_mtime, float(json.loads(marker.read_text())["compile_seconds"])))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return max(times)[1] if times else None
+
+
+def interpreting() -> bool:
+    """Whether numba's decorators in this process return plain Python functions."""
+    import os
+    import sys
+
+    config = sys.modules.get("numba.core.config")
+    if config is not None:
+        return bool(config.DISABLE_JIT)
+    return os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0")
+
+
+def interpret_this_process() -> bool:
+    """Make every kernel imported from now on run interpreted; False if it is too late (the
+    simulator's kernels were already imported, compiled) -- then nothing changes."""
+    import os
+    import sys
+
+    if any(m.startswith("rovlab.sim.loop") for m in sys.modules):
+        return interpreting()
+    os.environ["NUMBA_DISABLE_JIT"] = "1"
+    config = sys.modules.get("numba.core.config")
+    if config is not None:
+        config.reload_config()
+    return True
+
+
+def compile_in_background(key: str, scenario: str, design: str | None = None) -> str | None:
+    """Start a detached, low-priority process that compiles the loop ``scenario`` needs into the
+    cache (rovlab.sim.warm) unless one is already running for ``key``; returns the log file of
+    the compile under way, or None if there is no cache to fill."""
+    import os
+    import subprocess
+    import sys
+
+    folder = _ready_folder()
+    if folder is None:
+        return None
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        lock = folder / f"{key}.lock"
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                text = lock.read_text().strip()
+                if not text:
+                    import time
+
+                    if time.time() - lock.stat().st_mtime < 60:
+                        return str(folder / f"{key}.log")  # its process is being started
+                else:
+                    os.kill(int(text), 0)
+                    return str(folder / f"{key}.log")  # a compile for this loop is under way
+            except (ProcessLookupError, ValueError):
+                pass  # a stale lock: its process is gone
+            except PermissionError:
+                return str(folder / f"{key}.log")  # alive, another user's
+            lock.unlink(missing_ok=True)
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        log = folder / f"{key}.log"
+        env = {k: v for k, v in os.environ.items() if k != "NUMBA_DISABLE_JIT"}
+        env["ROVLAB_JIT"] = "compile"
+        with open(log, "wb") as out:
+            argv = [sys.executable, "-m", "rovlab.sim.warm", scenario, "--key", key, "--lock", str(lock)]
+            proc = subprocess.Popen(argv + (["--config", design] if design else []), stdin=subprocess.DEVNULL, stdout=out,
+                                    stderr=subprocess.STDOUT, env=env, start_new_session=True)
+        os.write(fd, str(proc.pid).encode())
+        os.close(fd)
+        return str(log)
+    except OSError:
+        return None

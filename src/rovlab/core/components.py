@@ -158,28 +158,40 @@ def restore(component: Any, state: dict[str, np.ndarray]) -> list[str]:
 # Slot functions (resolved at compile time)
 # --------------------------------------------------------------------------------------------
 
-def plant_truth(plant, truth):  # pragma: no cover - replaced by the compiled binding
-    raise NotImplementedError("slot functions run only inside compiled code")
+# Called from compiled code, a slot is replaced by the registered kernel at compile time (the
+# overloads below). Called from Python (an interpreted run: NUMBA_DISABLE_JIT, see rovlab._jit)
+# it looks the kernel up by the component's class.
+
+def _bound(slot: str, component: Any) -> Callable[..., Any]:
+    try:
+        return _REGISTRY[slot][type(component)]
+    except KeyError:
+        raise TypeError(f"{slot}: {type(component).__name__} is not registered "
+                        f"(rovlab.core.components.register_*)") from None
 
 
-def plant_advance(plant, drive, row, tau_cmd, tau_real):  # pragma: no cover
-    raise NotImplementedError("slot functions run only inside compiled code")
+def plant_truth(plant, truth):
+    return _bound("plant_truth", plant)(plant, truth)
 
 
-def estimator_correct(est, t, y, present, rep):  # pragma: no cover
-    raise NotImplementedError("slot functions run only inside compiled code")
+def plant_advance(plant, drive, row, tau_cmd, tau_real):
+    return _bound("plant_advance", plant)(plant, drive, row, tau_cmd, tau_real)
 
 
-def estimator_predict(est, t, tau):  # pragma: no cover
-    raise NotImplementedError("slot functions run only inside compiled code")
+def estimator_correct(est, t, y, present, rep):
+    return _bound("estimator_correct", est)(est, t, y, present, rep)
 
 
-def controller_step(ctrl, t, nav, ref, tau):  # pragma: no cover
-    raise NotImplementedError("slot functions run only inside compiled code")
+def estimator_predict(est, t, tau):
+    return _bound("estimator_predict", est)(est, t, tau)
 
 
-def controller_actuated(ctrl, t, tau_demanded, tau_achieved):  # pragma: no cover
-    raise NotImplementedError("slot functions run only inside compiled code")
+def controller_step(ctrl, t, nav, ref, tau):
+    return _bound("controller_step", ctrl)(ctrl, t, nav, ref, tau)
+
+
+def controller_actuated(ctrl, t, tau_demanded, tau_achieved):
+    return _bound("controller_actuated", ctrl)(ctrl, t, tau_demanded, tau_achieved)
 
 
 def _lookup(slot: str, comp_type) -> Callable:

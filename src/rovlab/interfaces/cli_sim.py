@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -69,6 +70,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     data, file = load_scenario_data(args.scenario)
     name = str(data.get("name") or Path(file).stem)
     out = Path(args.out or Path("out") / name)
+    first_run(data, file, args.scenario, args.runs, args.workers)
     result, metrics, notes = _run_and_write(data, file, args.seed, out, figures=not args.no_figures)
     sc = result.scenario
     print(f"{sc.name} (seed {sc.seed}, {sc.plant} plant, {sc.duration_s:g} s) -> {out}/")
@@ -82,6 +84,101 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     for n in notes:
         print(f"note: {n}", file=sys.stderr)
     return 130 if interrupted else 0  # Ctrl-C: the finished runs are written, the status says it stopped
+
+
+# Interpreted, a control step of the loop costs ~0.6 ms (KF + LQG) to ~2 ms (EKF + DP) on a 2-core
+# machine; compiling a loop costs one to three minutes there (rovlab._jit).
+_INTERPRETED_STEP_S = 2.5e-3
+_INTERPRET_BUDGET_S = 20.0
+
+
+def first_run_tier(mode: str, compiled: bool, rows: int, parallel: int) -> str:
+    """How to run ``rows`` control steps (over ``parallel`` processes): "cached" (the compiled
+    loop is in the cache), "interpret" or "compile" (and wait for it)."""
+    if mode == "interpret":
+        return "interpret"
+    if compiled:
+        return "cached"
+    if mode == "auto" and rows * _INTERPRETED_STEP_S / max(1, parallel) <= _INTERPRET_BUDGET_S:
+        return "interpret"
+    return "compile"
+
+
+def loop_of(data, file, controller: str | None = None, design: str | None = None) -> tuple[str, str, float] | None:
+    """(marker key, description, duration in control steps) of the loop a scenario runs, read
+    without importing the simulator (so without compiling anything); None if the scenario or its
+    configuration is bad (the run itself then reports it, with file and key)."""
+    from rovlab import _jit
+    from rovlab.params.design import load_design_config
+    from rovlab.params.validate import ConfigError
+    from rovlab.sim.scenario import scenario_from_dict
+
+    try:
+        sc = scenario_from_dict(data, file=file)
+        config = load_design_config(design or sc.design)
+    except ConfigError:
+        return None
+    estimator, controller = sc.estimator or config.estimator, controller or sc.controller or config.controller
+    rows = math.floor(sc.duration_s / config.sample_time + 1e-9) + 1
+    return (_jit.loop_key(sc.plant, estimator, controller), f"the {estimator} + {controller} loop ({sc.plant} plant)",
+            rows)
+
+
+def checked_jit_mode() -> str:
+    from rovlab import _jit
+    from rovlab.interfaces.cli import UserError
+
+    try:
+        return _jit.jit_mode()
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+
+
+def announce_compile(loops: list[tuple[str, str, float] | None]) -> None:
+    """Say which loops compile now (those not in the cache), and about how long it takes."""
+    from rovlab import _jit
+
+    if _jit.interpreting():
+        return
+    todo = {key: what for key, what, _ in filter(None, loops) if not _jit.is_compiled(key)}
+    if not todo:
+        return
+    known = [_jit.compile_estimate(k) for k in todo]
+    if all(t is not None for t in known):
+        about = f"about {sum(t for t in known if t is not None):.0f} s, as last time"
+    else:
+        about = f"{'a minute or more' if len(todo) == 1 else 'a few minutes'} on a 2-core machine"
+    print(f"compiling {' and '.join(todo.values())} once ({about}); later runs load "
+          f"{'it' if len(todo) == 1 else 'them'} from the cache", file=sys.stderr, flush=True)
+
+
+def first_run(data, file, ref: str, runs: int, workers: int | None, design: str | None = None,
+              live: bool = False) -> None:
+    """Before anything is compiled: if the loop for this scenario's components is not in the cache
+    yet, either run it interpreted (short work, or ``live``: paced at most 50x real time, which the
+    interpreter keeps up with; the loop compiles in the background for the next runs) or say that
+    it compiles now and for how long (rovlab._jit; ROVLAB_JIT overrides)."""
+    from rovlab import _jit
+
+    mode = checked_jit_mode()
+    loop = loop_of(data, file, design=design)
+    if loop is None or _jit.interpreting():
+        return  # a bad scenario (reported by the run) or NUMBA_DISABLE_JIT set by the user
+    key, what, rows = loop
+    work = 0 if live else int(runs * rows)
+    tier = first_run_tier(mode, _jit.is_compiled(key), work, min(runs, workers or os.cpu_count() or 1))
+    if tier == "cached":
+        return
+    if tier == "interpret" and _jit.interpret_this_process():
+        if mode == "interpret":
+            return
+        log = _jit.compile_in_background(key, ref, design)
+        msg = f"first run of {what} here: it runs interpreted this time (same results, no compile wait)"
+        if log:
+            msg += f"; it compiles in the background for the next runs (low priority; log {log})"
+        print(msg, file=sys.stderr, flush=True)
+        return
+    announce_compile([loop])
 
 
 def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
@@ -210,6 +307,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         raise UserError(f"--compare-runs must be >= 0, got {args.compare_runs}")
     out = Path(args.out)
     cases = ("step-observer-model", "step-process-model", "dropout")
+    checked_jit_mode()
+    loops = [loop_of(*load_scenario_data(name)) for name in cases]
+    if args.compare_runs > 0:
+        loops += [loop_of(*load_scenario_data(name), controller=c) for name in _COMPARISONS for c in ("lqg", "mrac")]
+    announce_compile(loops)
     print(f"rovlab demo: the thesis case studies (Sandøy 2016, figs. 5.2-5.4) on uDrone -> {out}/")
     sections = []
     rows = []

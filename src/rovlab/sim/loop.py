@@ -212,7 +212,7 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
 # class defined outside rovlab (a user's script, a test module) in that index would make the
 # index unreadable in any process that cannot import that module, so loops with such components
 # are compiled by this uncached copy instead (per process).
-run_loop_uncached = njit(cache=False)(run_loop.py_func)
+run_loop_uncached = njit(cache=False)(getattr(run_loop, "py_func", run_loop))
 
 
 def loop_for(*components: object):

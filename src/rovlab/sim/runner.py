@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from rovlab import _jit
 from rovlab.allocation.solvers import Allocator
 from rovlab.core.components import (
     TRUTH_INDEX,
@@ -41,7 +42,7 @@ from rovlab.params.vehicle import Vehicle, load_vehicle
 from rovlab.sim import metrics as mx
 from rovlab.sim.actuators import Actuators, make_actuators
 from rovlab.sim.components import build_pair
-from rovlab.sim.loop import Drive, Logs, draw, loop_for, new_logs
+from rovlab.sim.loop import Drive, Logs, draw, loop_for, new_logs, run_loop
 from rovlab.sim.plant import ObserverPlant, ProcessPlant
 from rovlab.sim.scenario import Scenario, scenario_from_dict
 
@@ -168,6 +169,20 @@ class Prepared:
     @property
     def channels(self) -> tuple[Any, ...]:
         return self.design.estimator.channels
+
+    @property
+    def loop_key(self) -> str:
+        """The combination of components the loop is compiled for, e.g. "process-kf-lqg"."""
+        sc = self.scenario
+        return _jit.loop_key(sc.plant, sc.estimator or self.config.estimator,
+                             sc.controller or self.config.controller)
+
+
+def first_rows(drive: Drive, n: int) -> Drive:
+    """The draws and schedule of a run's first n control steps."""
+    n_sub = drive.plant_normals.shape[0] // max(1, drive.refs.shape[0])
+    return Drive(drive.plant_normals[:n * n_sub], drive.bias_normals[:n], drive.sensor_normals[:n],
+                 drive.dropout[:n], drive.refs[:n], drive.heave_force[:n], drive.pset[:n])
 
 
 def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: int | None = None,
@@ -379,6 +394,7 @@ class Simulation:
         self.estimator = fresh(prep.design.estimator.kernel)
         self.controller = fresh(prep.design.controller.kernel)
         self.k = 0
+        self._marked = False
 
     def components(self) -> dict[str, Any]:
         """The stateful components by slot (for saving/restoring state, rovlab.core.components)."""
@@ -390,8 +406,13 @@ class Simulation:
         logs = new_logs(n, len(prep.channels), self.estimator.x.shape[0], prep.actuators.rows.shape[0],
                         self.controller.state.shape[0])
         loop = loop_for(self.plant, self.estimator, self.controller)
+        t0 = time.perf_counter()
         done = loop(self.k, self.k + n, prep.h, self.plant, prep.sensors, self.estimator, self.controller,
                     prep.actuators, prep.nav_of, prep.nees_idx, drive, logs)
+        if loop is run_loop and not self._marked:  # compiled or loaded from the disk cache
+            self._marked = True
+            if not _jit.interpreting():
+                _jit.mark_compiled(prep.loop_key, time.perf_counter() - t0)
         self.k += done
         if done < n:
             raise PlantDiverged(self.k * prep.h, logs, done)

@@ -63,7 +63,7 @@ def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, rep, nav, 
         controller_actuated(ctrl, t, tau, tau_cmd)
 
 
-control_step_uncached = njit(cache=False)(control_step.py_func)
+control_step_uncached = njit(cache=False)(getattr(control_step, "py_func", control_step))
 
 
 def control_step_for(*components: object):
@@ -101,5 +101,5 @@ def plant_sample(k, plant, sensors, drive, row, truth, y, present):
     return True
 
 
-plant_push_uncached = njit(cache=False)(plant_push.py_func)
-plant_sample_uncached = njit(cache=False)(plant_sample.py_func)
+plant_push_uncached = njit(cache=False)(getattr(plant_push, "py_func", plant_push))
+plant_sample_uncached = njit(cache=False)(getattr(plant_sample, "py_func", plant_sample))
