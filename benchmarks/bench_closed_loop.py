@@ -61,9 +61,9 @@ def main() -> None:
     eta, nu = x[:4].copy(), x[4:].copy()
     t_rk4 = _timing.per_call(lambda: kin.rk4_step(p, x, tau, np.zeros(4), 0.01))
     t_pvs = _timing.per_call(lambda: pvs_style_step(v, M_inv, eta, nu, tau, 0.01))
-    xs, kw, fw = x.copy(), np.zeros((4, 8)), np.zeros(4)
+    xs, fw = x.copy(), np.zeros(4)
     normals = np.zeros((6000, 4), dtype=np.float32)
-    t_loop = _timing.per_call(lambda: process_advance(p, xs, tau, 0.01, np.zeros(4), normals, kw, fw)) / 6000
+    t_loop = _timing.per_call(lambda: process_advance(p, xs, tau, 0.01, np.zeros(4), normals, fw)) / 6000
     _timing.table("Plant step (physics only)", [
         (f"RK4 step inside the loop ({1 / t_loop / 1e6:,.1f} M steps/s)", t_loop,
          f"PVS-style numpy Euler step ({1 / t_pvs / 1e3:,.0f} k steps/s)", t_pvs),

@@ -156,22 +156,21 @@ def submerged(p, z):
 
 
 @njit(cache=True, inline="always")
-def rhs_into(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, out):
-    """Time derivative of x = [eta; nu] (8) into ``out`` for the total force f = tau + b (+ noise).
+def rhs(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3):
+    """Time derivative of x = [eta; nu] (8, a tuple) for the total force f = tau + b (+ noise).
 
-    The one right-hand side of the process model: the simulator's RK4, :func:`nu_dot_packed`,
-    :func:`plant_rhs` and the model API all evaluate this function. Scalars in, so compiled
-    callers need no temporary arrays.
+    The one right-hand side of the process model: the simulator's RK4, :func:`rhs_into`,
+    :func:`nu_dot_packed`, :func:`plant_rhs` and the model API all evaluate this function.
+    Scalars in and out, so compiled callers need no arrays (nor their reference counting).
     """
     c, s = math.cos(x3), math.sin(x3)
-    out[0] = c * x4 - s * x5
-    out[1] = s * x4 + c * x5
-    out[2] = x6
-    out[3] = x7
+    d0 = c * x4 - s * x5
+    d1 = s * x4 + c * x5
     # relative velocity nu_r = nu - nu_c (the current in body axes); the hydrodynamics below see nu_r
     u_c = c * p[P_VC] + s * p[P_VC + 1]
     v_c = -s * p[P_VC] + c * p[P_VC + 1]
     w_c = p[P_VC + 2]
+    d2 = x6
     x4 = x4 - u_c
     x5 = x5 - v_c
     x6 = x6 - w_c
@@ -187,15 +186,26 @@ def rhs_into(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, out):
           + (p[P_LIN + 2] + p[P_QUAD + 2] * abs(x6) + p[P_CUB + 2] * x6 * x6) * x6)
     g3 = (f3 - ((a - p[P_YVDOT] * x5) * x4 + (-cc + p[P_XUDOT] * x4) * x5)
           + (p[P_LIN + 3] + p[P_QUAD + 3] * abs(x7) + p[P_CUB + 3] * x7 * x7) * x7)
-    for i in (0, 1, 3):  # heave is decoupled in M (M_RB row z = [0, 0, m, 0], M_A diagonal)
-        out[4 + i] = (p[P_MINV + 4 * i] * g0 + p[P_MINV + 4 * i + 1] * g1 + p[P_MINV + 4 * i + 3] * g3)
+    # heave is decoupled in M (M_RB row z = [0, 0, m, 0], M_A diagonal)
+    d4 = p[P_MINV] * g0 + p[P_MINV + 1] * g1 + p[P_MINV + 3] * g3
+    d5 = p[P_MINV + 4] * g0 + p[P_MINV + 5] * g1 + p[P_MINV + 7] * g3
+    d7 = p[P_MINV + 12] * g0 + p[P_MINV + 13] * g1 + p[P_MINV + 15] * g3
     if s_sub >= 1.0:  # submerged (almost always): 1 / (m - Z_wdot) is entry (2, 2) of M^-1, no division
-        out[6] = p[P_MINV + 10] * g2
+        d6 = p[P_MINV + 10] * g2
     else:
-        out[6] = g2 / (p[P_M] - s_sub * p[P_ZWDOT])
+        d6 = g2 / (p[P_M] - s_sub * p[P_ZWDOT])
     if u_c != 0.0 or v_c != 0.0:  # nu_c_dot = d/dt R(psi)^T V_c = [r v_c, -r u_c, 0, 0]
-        out[4] += x7 * v_c
-        out[5] -= x7 * u_c
+        d4 += x7 * v_c
+        d5 -= x7 * u_c
+    return d0, d1, d2, x7, d4, d5, d6, d7
+
+
+@njit(cache=True, inline="always")
+def rhs_into(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, out):
+    """:func:`rhs` into the array ``out`` (8)."""
+    d = rhs(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3)
+    for i in range(8):
+        out[i] = d[i]
 
 
 @njit(cache=True)
@@ -282,20 +292,21 @@ def plant_rhs(p: np.ndarray, x: np.ndarray, tau: np.ndarray, b: np.ndarray) -> n
 
 
 @njit(cache=True)
-def rk4_inplace(p: np.ndarray, x: np.ndarray, f: np.ndarray, h: float, k: np.ndarray) -> None:
-    """One classical Runge-Kutta step of x (in place) with the force f held; k is (4, 8) work."""
+def rk4_inplace(p: np.ndarray, x: np.ndarray, f: np.ndarray, h: float) -> None:
+    """One classical Runge-Kutta step of x (in place) with the force f held."""
     f0, f1, f2, f3 = f[0], f[1], f[2], f[3]
-    rhs_into(p, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], f0, f1, f2, f3, k[0])
+    x0, x1, x2, x3, x4, x5, x6, x7 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]
+    k1 = rhs(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3)
     hh = 0.5 * h
-    rhs_into(p, x[0] + hh * k[0, 0], x[1] + hh * k[0, 1], x[2] + hh * k[0, 2], x[3] + hh * k[0, 3],
-             x[4] + hh * k[0, 4], x[5] + hh * k[0, 5], x[6] + hh * k[0, 6], x[7] + hh * k[0, 7], f0, f1, f2, f3, k[1])
-    rhs_into(p, x[0] + hh * k[1, 0], x[1] + hh * k[1, 1], x[2] + hh * k[1, 2], x[3] + hh * k[1, 3],
-             x[4] + hh * k[1, 4], x[5] + hh * k[1, 5], x[6] + hh * k[1, 6], x[7] + hh * k[1, 7], f0, f1, f2, f3, k[2])
-    rhs_into(p, x[0] + h * k[2, 0], x[1] + h * k[2, 1], x[2] + h * k[2, 2], x[3] + h * k[2, 3],
-             x[4] + h * k[2, 4], x[5] + h * k[2, 5], x[6] + h * k[2, 6], x[7] + h * k[2, 7], f0, f1, f2, f3, k[3])
+    k2 = rhs(p, x0 + hh * k1[0], x1 + hh * k1[1], x2 + hh * k1[2], x3 + hh * k1[3],
+             x4 + hh * k1[4], x5 + hh * k1[5], x6 + hh * k1[6], x7 + hh * k1[7], f0, f1, f2, f3)
+    k3 = rhs(p, x0 + hh * k2[0], x1 + hh * k2[1], x2 + hh * k2[2], x3 + hh * k2[3],
+             x4 + hh * k2[4], x5 + hh * k2[5], x6 + hh * k2[6], x7 + hh * k2[7], f0, f1, f2, f3)
+    k4 = rhs(p, x0 + h * k3[0], x1 + h * k3[1], x2 + h * k3[2], x3 + h * k3[3],
+             x4 + h * k3[4], x5 + h * k3[5], x6 + h * k3[6], x7 + h * k3[7], f0, f1, f2, f3)
     h6 = h / 6.0
     for i in range(8):
-        x[i] += h6 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+        x[i] += h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
 
 @njit(cache=True)
@@ -305,7 +316,7 @@ def rk4_step(p: np.ndarray, x: np.ndarray, tau: np.ndarray, b: np.ndarray, h: fl
     f = np.empty(4)
     for i in range(4):
         f[i] = tau[i] + b[i]
-    rk4_inplace(p, out, f, h, np.empty((4, 8)))
+    rk4_inplace(p, out, f, h)
     return out
 
 

@@ -42,7 +42,6 @@ class ProcessPlant(NamedTuple):
     noise_std: np.ndarray  # sqrt(W / h_plant) of the white force noise (4)
     h: float  # RK4 step [s]
     n_sub: int  # RK4 steps per control step
-    k: np.ndarray  # (4, 8) RK4 work
     f: np.ndarray  # (4) work
     tb: np.ndarray  # (4) work
     p_sets: np.ndarray  # (n_sets, P_SIZE): the parameters after each truth event (row 0 = p)
@@ -81,17 +80,17 @@ def _process_truth(plant, truth):
 
 
 @njit(cache=True)
-def process_advance(p, x, tau_b, h, noise_std, normals, k, f):
+def process_advance(p, x, tau_b, h, noise_std, normals, f):
     """Advance the process plant over len(normals) RK4 steps of length h (in place).
 
     tau_b (4) is the thruster force plus the bias, held over the control period (ZOH);
     normals (n_sub, 4) are standard normal draws and noise_std (4) = sqrt(W / h) scales them
-    into the white force noise of each step. k (4, 8) and f (4) are work arrays.
+    into the white force noise of each step. f (4) is a work array.
     """
     for j in range(normals.shape[0]):
         for i in range(4):
             f[i] = tau_b[i] + noise_std[i] * normals[j, i]
-        rk4_inplace(p, x, f, h, k)
+        rk4_inplace(p, x, f, h)
 
 
 @njit(cache=True, inline="always")
@@ -104,7 +103,7 @@ def _process_step(plant, drive, row, tau_cmd, tau_real):
     tau_b[2] += extra
     j = drive.pset[row]
     process_advance(plant.p_sets[j], plant.x, tau_b, plant.h, plant.noise_std,
-                    drive.plant_normals[row * n:(row + 1) * n], plant.k, plant.f)
+                    drive.plant_normals[row * n:(row + 1) * n], plant.f)
     plant.dist[0] = j
     plant.dist[1] = extra
     for i in range(4):

@@ -337,7 +337,7 @@ def make_plant(design: Design, sc: Scenario, truth: Vehicle, n_sub: int,
     return ProcessPlant(p, sc.initial.astype(float).copy(), np.asarray(bias0, dtype=float).copy(),
                         np.asarray(phi, dtype=float), np.asarray(std, dtype=float),
                         np.sqrt(sc.process_noise_psd / sc.plant_step_s), float(sc.plant_step_s), int(n_sub),
-                        np.empty((4, 8)), np.empty(4), np.empty(4), p_sets, np.zeros(2))
+                        np.empty(4), np.empty(4), p_sets, np.zeros(2))
 
 
 def _load_ref(sc: Scenario, key: str, loader: Callable[[str], Any], book: DesignBook) -> Any:
