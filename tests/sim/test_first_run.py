@@ -159,3 +159,43 @@ def test_a_long_first_run_says_it_compiles(tmp_path):
     assert ("compiling the kf + lqg loop (observer plant) once (a minute or more on a 2-core machine); "
             "later runs load it from the cache") in proc.stderr
     assert not list(cache.glob("rovlab/numba/*/rovlab-ready/*.lock"))
+
+
+def test_the_hmi_starts_at_once_in_an_empty_cache(tmp_path):
+    import re
+    import urllib.request
+
+    cache = tmp_path / "cache"
+    environ = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_DISABLE_JIT", "ROVLAB_JIT")}
+    environ.update(XDG_CACHE_HOME=str(cache), PYTHONUNBUFFERED="1", OPENBLAS_NUM_THREADS="1")
+    proc = subprocess.Popen([sys.executable, "-m", "rovlab.interfaces.cli", "hmi", "--port", "0", "--speed", "10",
+                             "--out", str(tmp_path / "hmi")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=environ)
+    try:
+        url = None
+        while url is None:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            m = re.search(r"http://127\.0\.0\.1:\d+/", line)
+            url = m.group(0) if m else None
+        assert url, proc.stderr.read()
+        # it runs from the start (a hang guard, not a timing bound: compiling would take minutes)
+        state = {}
+        for _ in range(120 * 4):
+            with urllib.request.urlopen(url + "api/state", timeout=10) as r:
+                state = json.loads(r.read())
+            if state["time_s"] >= 5.0:
+                break
+            subprocess.run(["sleep", "0.25"], check=True)
+        assert state["time_s"] >= 5.0, state
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        _stop_background(cache)
+    assert proc.returncode == 0, err
+    assert "first run of the kf + lqg loop (process plant) here: it runs interpreted" in err
+    log = next((tmp_path / "hmi").glob("session-*.csv"))
+    assert log.read_text().count("\n") > 50
