@@ -132,8 +132,8 @@ def simulate_rows(work: str, floor: float) -> None:
     """`rovlab simulate step-process-model`: the first run as a user gets it (interpreted, the
     loop compiling in the background), when that background compile is done, the runs after it,
     and a first run that compiles in the foreground (ROVLAB_JIT=compile: the compile itself)."""
-    argv = ROVLAB + ["simulate", "step-process-model", "--out", str(Path(work) / "sim"), "--no-figures"]
-    label = "rovlab simulate step-process-model --no-figures"
+    argv = ROVLAB + ["simulate", "step-process-model", "--out", str(Path(work) / "sim")]  # figures and report too
+    label = "rovlab simulate step-process-model"
     with tempfile.TemporaryDirectory(prefix="rovlab-cold-") as cache:
         env = _cold_env(cache)
         t0 = time.perf_counter()
