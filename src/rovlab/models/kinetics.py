@@ -151,6 +151,8 @@ def submerged(p, z):
     """Submerged fraction of the hull with its centre at depth z (z down, surface at 0): 1 below
     z = h/2, 0 above z = -h/2, linear in between (a box-shaped hull breaching the surface)."""
     hh = p[P_HALF_H]
+    if z >= hh:  # deep (almost always): exactly what the formula below clamps to, without its division
+        return 1.0
     s = (z + hh) / (2.0 * hh)
     return 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
 
@@ -167,13 +169,14 @@ def rhs(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3):
     d0 = c * x4 - s * x5
     d1 = s * x4 + c * x5
     # relative velocity nu_r = nu - nu_c (the current in body axes); the hydrodynamics below see nu_r
-    u_c = c * p[P_VC] + s * p[P_VC + 1]
-    v_c = -s * p[P_VC] + c * p[P_VC + 1]
-    w_c = p[P_VC + 2]
     d2 = x6
-    x4 = x4 - u_c
-    x5 = x5 - v_c
-    x6 = x6 - w_c
+    u_c = v_c = 0.0
+    if p[P_VC] != 0.0 or p[P_VC + 1] != 0.0:  # (without current nu_r = nu exactly: skip the rotation)
+        u_c = c * p[P_VC] + s * p[P_VC + 1]
+        v_c = -s * p[P_VC] + c * p[P_VC + 1]
+        x4 = x4 - u_c
+        x5 = x5 - v_c
+    x6 = x6 - p[P_VC + 2]
     m = p[P_M]
     a = m * (x5 + p[P_XG] * x7)
     cc = m * (x4 - p[P_YG] * x7)
