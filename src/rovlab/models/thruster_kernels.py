@@ -15,7 +15,8 @@ K_KIND, K_NEUTRAL, K_DEAD, K_KLP, K_KNLP, K_KLN, K_KNLN, K_PMIN, K_PMAX = range(
 KIND_QUADRATIC, KIND_TABLE = 0.0, 1.0
 ZERO_FORCE = 1e-10  # |f| below this [N] is commanded as neutral (it lies in the dead band anyway)
 
-KERNELS = ("_quad_force", "_quad_pwm", "_table_force", "_table_pwm", "bank_force", "bank_pwm")
+KERNELS = ("_quad_force", "_quad_pwm", "_table_force", "_table_pwm", "bank_force_into", "bank_pwm_into", "bank_force",
+           "bank_pwm")
 
 
 def _quad_force(row: np.ndarray, pwm: float) -> float:
@@ -68,23 +69,35 @@ def _table_pwm(row: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, f: flo
     return row[K_PMIN]
 
 
-def bank_force(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: np.ndarray) -> np.ndarray:
-    """Thrust of every thruster for a vector of PWM commands (saturated to their ranges)."""
-    out = np.empty(rows.shape[0])
+def bank_force_into(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: np.ndarray,
+                    out: np.ndarray) -> None:
+    """Thrust of every thruster for a vector of PWM commands (saturated to their ranges) into out."""
     for i in range(rows.shape[0]):
         if rows[i, K_KIND] == KIND_QUADRATIC:
             out[i] = _quad_force(rows[i], pwm[i])
         else:
             out[i] = _table_force(rows[i], grid_pwm, grid_f[i], pwm[i])
+
+
+def bank_pwm_into(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, force: np.ndarray,
+                  out: np.ndarray) -> None:
+    """PWM command of every thruster for a vector of thrusts (saturated to their ranges) into out."""
+    for i in range(rows.shape[0]):
+        if rows[i, K_KIND] == KIND_QUADRATIC:
+            out[i] = _quad_pwm(rows[i], force[i])
+        else:
+            out[i] = _table_pwm(rows[i], grid_pwm, grid_f[i], force[i])
+
+
+def bank_force(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: np.ndarray) -> np.ndarray:
+    """Thrust of every thruster for a vector of PWM commands (saturated to their ranges)."""
+    out = np.empty(rows.shape[0])
+    bank_force_into(rows, grid_pwm, grid_f, pwm, out)
     return out
 
 
 def bank_pwm(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, force: np.ndarray) -> np.ndarray:
     """PWM command of every thruster for a vector of thrusts (saturated to their ranges)."""
     out = np.empty(rows.shape[0])
-    for i in range(rows.shape[0]):
-        if rows[i, K_KIND] == KIND_QUADRATIC:
-            out[i] = _quad_pwm(rows[i], force[i])
-        else:
-            out[i] = _table_pwm(rows[i], grid_pwm, grid_f[i], force[i])
+    bank_pwm_into(rows, grid_pwm, grid_f, force, out)
     return out

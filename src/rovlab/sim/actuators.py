@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from rovlab.allocation.solvers import Allocator, allocate_into
-from rovlab.models.thrusters import ThrusterBank, bank_force, bank_pwm
+from rovlab.models.thrusters import ThrusterBank, bank_force_into, bank_pwm_into
 
 _DOF6 = (0, 1, 2, 5)  # X, Y, Z, N in the 6-DOF wrench [X, Y, Z, K, M, N]
 
@@ -36,13 +36,16 @@ class Actuators(NamedTuple):
     tau6: np.ndarray  # (6) work
     f: np.ndarray  # (n) work: allocated forces
     frac: np.ndarray  # (6) work: achieved share per DOF
+    cmd: np.ndarray  # (n) work: PWM commands
+    f_real: np.ndarray  # (n) work: the thrust they give
 
 
 def make_actuators(allocator: Allocator, bank: ThrusterBank, B_true: np.ndarray, pwm_res: float) -> Actuators:
     return Actuators(allocator.B, allocator.T, allocator._s, allocator.f_min, allocator.f_max, allocator.level,
                      int(allocator.n_levels), np.ascontiguousarray(B_true, dtype=float), bank.rows, bank.grid_pwm,
                      bank.grid_force, float(pwm_res), np.zeros(6),
-                     np.zeros(allocator.B.shape[1]), np.ones(6))
+                     np.zeros(allocator.B.shape[1]), np.ones(6), np.zeros(bank.rows.shape[0]),
+                     np.zeros(bank.rows.shape[0]))
 
 
 @njit(cache=True, inline="always")
@@ -57,14 +60,16 @@ def actuate(act, tau, tau_cmd, tau_real, pwm):
     tau6[5] = tau[3]
     f = act.f
     allocate_into(act.B, act.T, act.s, act.f_min, act.f_max, tau6, act.level, act.n_levels, True, f, act.frac)
-    cmd = bank_pwm(act.rows, act.grid_pwm, act.grid_force, f)
+    cmd = act.cmd
+    bank_pwm_into(act.rows, act.grid_pwm, act.grid_force, f, cmd)
     nt = cmd.shape[0]
     if act.pwm_res > 0.0:
         for i in range(nt):
             cmd[i] = act.pwm_res * np.round(cmd[i] / act.pwm_res)
     for i in range(nt):
         pwm[i] = cmd[i]
-    f_real = bank_force(act.rows, act.grid_pwm, act.grid_force, cmd)
+    f_real = act.f_real
+    bank_force_into(act.rows, act.grid_pwm, act.grid_force, cmd, f_real)
     for a in range(4):
         r = _DOF6[a]
         acc = 0.0
