@@ -70,7 +70,8 @@ def _init_worker(campaign: Campaign | None, data: Mapping[str, Any], file: str, 
 
 
 def _worker_chunk(seeds: Sequence[int]) -> list[dict[str, Any]]:
-    assert _worker is not None, "pool worker started without _init_worker"
+    if _worker is None:
+        raise RuntimeError("a Monte Carlo pool worker was started without its campaign (_init_worker)")
     return [_worker.run(s) for s in seeds]
 
 
