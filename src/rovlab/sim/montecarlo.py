@@ -219,12 +219,10 @@ def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
     out: dict[str, float] = {}
     for k, v in d.items():
         key = f"{prefix}{k}"
-        if isinstance(v, Mapping):
+        if isinstance(v, (int, float)):  # numbers first (most entries; bool is an int): cheaper than Mapping's check
+            out[key] = float(v)
+        elif isinstance(v, Mapping):
             out.update(_flatten(v, key + "."))
-        elif isinstance(v, bool):
-            out[key] = float(v)
-        elif isinstance(v, (int, float)):
-            out[key] = float(v)
         elif k == "events":
             continue  # per-event records (sensor losses) are summarised apart
         elif isinstance(v, list) and v and all(isinstance(x, Mapping) for x in v):
