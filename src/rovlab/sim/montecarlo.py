@@ -105,9 +105,7 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     results[seeds[0]] = first
     done = 1
     rest = seeds[1:]
-    # a few chunks per worker: both cores busy to the end, few round trips, a moving progress bar
-    size = max(1, min(100, -(-len(rest) // (workers * 8))))
-    chunks = [rest[i:i + size] for i in range(0, len(rest), size)]
+    chunks = _guided_chunks(rest, workers)
     fork = "fork" in mp.get_all_start_methods()
     ctx = mp.get_context("fork") if fork else mp.get_context()
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=_init_worker,
@@ -132,6 +130,19 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
         return [results[s] for s in seeds if s in results]
     pool.shutdown()
     return [results[s] for s in seeds]
+
+
+def _guided_chunks(seeds: Sequence[int], workers: int, *, largest: int = 100, smallest: int = 1) -> list[list[int]]:
+    """Chunks of seeds for the pool, each a share of what is left (guided scheduling): long chunks
+    first (few round trips), short ones at the end, so that no worker idles while another finishes
+    a long last chunk; the progress bar moves throughout."""
+    out = []
+    i, n = 0, len(seeds)
+    while i < n:
+        size = max(smallest, min(largest, (n - i) // (workers * 4)))
+        out.append(list(seeds[i:i + size]))
+        i += size
+    return out
 
 
 def dask_available() -> bool:

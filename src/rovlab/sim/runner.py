@@ -201,7 +201,8 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     dropout, refs = schedule(sc, est.channels, times)
     heave, pset = disturbances(sc, times, observer=sc.plant == "observer", g=truth.gravity)
 
-    # plant: initial state, then every draw of the run in a fixed order (rovlab.sim.loop.draw)
+    # plant: initial state, then every draw of the run in a fixed order (rovlab.sim.loop.draw);
+    # reseed() redoes exactly these draws for another seed: keep the two in step
     bias0 = sc.bias_std * rng.standard_normal(4)  # start in the stationary distribution
     plant = make_plant(design, sc, truth, n_sub, bias0)
     normals = draw(rng, n_ctrl, n_sub, plant_draws(plant), len(est.channels))
