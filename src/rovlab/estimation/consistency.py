@@ -17,9 +17,10 @@ uses; angle errors must be wrapped before calling them (see ``wrap_errors``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from rovlab.core.angles import wrap
 
@@ -58,7 +59,14 @@ def chi2_interval(dof: int, runs: int = 1, probability: float = 0.95) -> tuple[f
         raise ValueError("need dof >= 1, runs >= 1 and 0 < probability < 1")
     a = (1.0 - probability) / 2.0
     k = dof * runs
-    return float(chi2.ppf(a, k) / runs), float(chi2.ppf(1.0 - a, k) / runs)
+    return float(_chi2_ppf(a, k) / runs), float(_chi2_ppf(1.0 - a, k) / runs)
+
+
+def _chi2_ppf(q: float, dof: Any) -> Any:
+    """scipy.stats.chi2.ppf(q, dof) for 0 < q < 1 and dof >= 1 (an int or an int array), by the
+    special function scipy.stats computes it with (the inverse of the regularised lower incomplete
+    gamma function), so without importing scipy.stats (~0.5 s of every Monte Carlo process)."""
+    return 2.0 * gammaincinv(np.asarray(dof, dtype=float) / 2.0, q)
 
 
 @dataclass(frozen=True)
@@ -86,8 +94,8 @@ class ConsistencyCheck:
         ok = count > 0
         a = (1.0 - self.probability) / 2.0
         k = self.dof * count[ok]
-        lo[ok] = chi2.ppf(a, k) / count[ok]
-        hi[ok] = chi2.ppf(1.0 - a, k) / count[ok]
+        lo[ok] = _chi2_ppf(a, k) / count[ok]
+        hi[ok] = _chi2_ppf(1.0 - a, k) / count[ok]
         return lo, hi
 
     @property

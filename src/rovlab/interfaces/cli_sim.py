@@ -77,7 +77,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     interrupted = False
     if args.runs > 1:
         summary = _monte_carlo(data, file, sc.seed, args.runs, args.workers, args.backend, args.scheduler, out,
-                               result, metrics, notes)
+                               result, metrics, notes, figures=not args.no_figures)
         _print_mc(summary)
         interrupted = bool(summary.get("interrupted"))
     _print_summary([(sc.name, metrics)])
@@ -201,7 +201,8 @@ def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
     return result, metrics, notes
 
 
-def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path, result, metrics, notes):
+def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path, result, metrics, notes, *,
+                 figures: bool = True):
     from rovlab.sim.montecarlo import Progress, run_many, summarise_runs
     from rovlab.sim.output import write_json, write_monte_carlo
 
@@ -215,7 +216,8 @@ def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path,
     summary["interrupted"] = len(done) < runs
     n_plant = len(result.columns["time_s"]) * int(result.meta["sample_time_s"] / result.meta["plant_step_s"] + 0.5)
     summary["vehicle_steps_per_s"] = len(done) * n_plant / wall if wall > 0 else None
-    write_monte_carlo(out / "monte_carlo", result.scenario.name, summary, done, result.columns["time_s"], notes=notes)
+    write_monte_carlo(out / "monte_carlo", result.scenario.name, summary, done, result.columns["time_s"], notes=notes,
+                      figures=figures)
     metrics = dict(metrics)
     metrics["monte_carlo"] = summary
     write_json(out / "metrics.json", metrics)

@@ -217,6 +217,8 @@ def sensor_loss_events(columns: dict[str, np.ndarray], *, dropouts: Sequence[Any
     events = []
     for name in sorted(k for k in columns if k.startswith("status_")):
         codes = np.asarray(columns[name], dtype=float)
+        if ((codes >= 0.0) & (codes < 2.0)).all():
+            continue  # only ok/recovering (the usual case, once per Monte Carlo run): no loss to find
         sensor, quantity = _status_channel(name)
         labels = {c: code_label(c) for c in np.unique(codes[np.isfinite(codes)])}
         lost_codes = [c for c, label in labels.items() if label.startswith("lost")]

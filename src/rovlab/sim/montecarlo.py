@@ -1,10 +1,12 @@
 """Monte Carlo: one scenario run many times with independent seeds, in parallel.
 
 Run i uses seed ``base_seed + i``; its distributions and all its noise are drawn from that seed
-alone, so ``rovlab simulate SCENARIO --seed S`` replays any run. Runs go to a pool of forked
-worker processes (stdlib ``concurrent.futures``; the compiled loop is warmed up in the parent
-first, so forked workers start with it ready) or, with ``backend="dask"``, to a Dask cluster.
-Workers return only the metrics and the NEES/NIS series, not the full logs.
+alone, so ``rovlab simulate SCENARIO --seed S`` replays any run. The scenario is resolved and
+designed once per process (:class:`Campaign`); each run then only redraws what its seed decides.
+Runs go to a pool of forked worker processes (stdlib ``concurrent.futures``; the parent designs
+and runs the first seed before the fork, so the workers start with the design and the compiled
+loop ready) or, with ``backend="dask"``, to a Dask cluster. Workers return only the metrics and
+the NEES/NIS series, not the full logs.
 """
 
 from __future__ import annotations
@@ -22,20 +24,55 @@ import numpy as np
 from rovlab.sim import metrics as mx
 
 
-def _one_run(data: Mapping[str, Any], file: str, seed: int, book: Any = None) -> dict[str, Any]:
-    from rovlab.sim.runner import prepare, run_prepared, summarise
+class Campaign:
+    """What the runs of one scenario share within a process: the loaded files and the design
+    (a DesignBook) and, when the scenario has no distributions, one prepared run that every seed
+    reseeds (rovlab.sim.runner.reseed: only the plant's initial bias and the draws are redone).
+    A scenario with distributions is prepared afresh per seed, its values being drawn from it."""
 
-    prepared = prepare(data, file=file, seed=seed, book=book)
-    result = run_prepared(prepared)
-    m = summarise(result)
-    return {"seed": seed, "metrics": m, "nees": result.nees, "nis": result.nis}
+    def __init__(self, data: Mapping[str, Any], file: str, first_seed: int) -> None:
+        from rovlab.sim.runner import DesignBook, prepare
+        from rovlab.sim.scenario import has_distributions
+
+        self.data, self.file = data, file
+        self.book = DesignBook()
+        self.template = None if has_distributions(data) else prepare(data, file=file, seed=first_seed, book=self.book)
+
+    def prepared(self, seed: int) -> Any:
+        from rovlab.sim.runner import prepare, reseed
+
+        if self.template is None:
+            return prepare(self.data, file=self.file, seed=seed, book=self.book)
+        return reseed(self.template, seed)
+
+    def run(self, seed: int) -> dict[str, Any]:
+        """One run: its metrics (metrics.json of the run) and its NEES/NIS series."""
+        from rovlab.sim.runner import run_prepared, summarise
+
+        result = run_prepared(self.prepared(seed))
+        return {"seed": seed, "metrics": summarise(result), "nees": result.nees, "nis": result.nis}
 
 
 def _chunk(data: Mapping[str, Any], file: str, seeds: Sequence[int]) -> list[dict[str, Any]]:
-    from rovlab.sim.runner import DesignBook
+    """A chunk of runs where nothing is shared with the caller's process (a Dask worker)."""
+    campaign = Campaign(data, file, seeds[0])
+    return [campaign.run(s) for s in seeds]
 
-    book = DesignBook()  # the runs of a chunk share the loaded files and the design
-    return [_one_run(data, file, s, book) for s in seeds]
+
+_worker: Campaign | None = None  # the campaign of a pool worker process (set by _init_worker)
+
+
+def _init_worker(campaign: Campaign | None, data: Mapping[str, Any], file: str, first_seed: int) -> None:
+    """Pool worker start: a forked worker inherits the parent's campaign (designed, compiled loop
+    loaded); a spawned one builds its own, once."""
+    global _worker
+    _worker = campaign if campaign is not None else Campaign(data, file, first_seed)
+
+
+def _worker_chunk(seeds: Sequence[int]) -> list[dict[str, Any]]:
+    if _worker is None:
+        raise RuntimeError("a Monte Carlo pool worker was started without its campaign (_init_worker)")
+    return [_worker.run(s) for s in seeds]
 
 
 def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, workers: int | None = None,
@@ -44,34 +81,40 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     """Run the scenario once per seed; results in seed order."""
     seeds = list(seeds)
     workers = max(1, workers or os.cpu_count() or 1)
-    from rovlab.sim.runner import DesignBook
-
-    book = DesignBook()
-    if workers > 1 and backend == "processes":
-        _one_run(data, file, seeds[0], book)  # compile/load the loop here once; forked workers inherit it
     if backend == "dask":
         return _run_dask(data, file, seeds, scheduler, progress)
     if backend != "processes":
         raise ValueError(f"unknown Monte Carlo backend {backend!r}; expected 'processes' or 'dask'")
     n = len(seeds)
+    if n == 0:
+        return []
+    campaign = Campaign(data, file, seeds[0])  # the design, once; forked workers inherit it
+    out: list[dict[str, Any]] = []
     if workers == 1 or n == 1:
-        out = []
         try:
             for i, s in enumerate(seeds):
-                out.append(_one_run(data, file, s, book))
+                out.append(campaign.run(s))
                 if progress:
                     progress(i + 1, n)
         except KeyboardInterrupt:  # keep what finished, as the parallel path does
             print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
         return out
-    size = max(1, min(50, n // (workers * 4) or 1))
-    chunks = [seeds[i:i + size] for i in range(0, n, size)]
-    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
+    # the first run here: it loads the compiled loop before the fork, so no worker pays for it
     results: dict[int, dict[str, Any]] = {}
-    done = 0
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    first = campaign.run(seeds[0])
+    results[seeds[0]] = first
+    done = 1
+    rest = seeds[1:]
+    chunks = _guided_chunks(rest, workers)
+    fork = "fork" in mp.get_all_start_methods()
+    ctx = mp.get_context("fork") if fork else mp.get_context()
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=_init_worker,
+                               initargs=(campaign if fork else None, data, file, seeds[0]))
+    futures = []
     try:
-        futures = [pool.submit(_chunk, data, file, c) for c in chunks]
+        if progress:
+            progress(done, n)
+        futures = [pool.submit(_worker_chunk, c) for c in chunks]
         for fut in as_completed(futures):
             for r in fut.result():
                 results[r["seed"]] = r
@@ -87,6 +130,19 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
         return [results[s] for s in seeds if s in results]
     pool.shutdown()
     return [results[s] for s in seeds]
+
+
+def _guided_chunks(seeds: Sequence[int], workers: int, *, largest: int = 100, smallest: int = 1) -> list[list[int]]:
+    """Chunks of seeds for the pool, each a share of what is left (guided scheduling): long chunks
+    first (few round trips), short ones at the end, so that no worker idles while another finishes
+    a long last chunk; the progress bar moves throughout."""
+    out = []
+    i, n = 0, len(seeds)
+    while i < n:
+        size = max(smallest, min(largest, (n - i) // (workers * 4)))
+        out.append(list(seeds[i:i + size]))
+        i += size
+    return out
 
 
 def dask_available() -> bool:
@@ -174,12 +230,10 @@ def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
     out: dict[str, float] = {}
     for k, v in d.items():
         key = f"{prefix}{k}"
-        if isinstance(v, Mapping):
+        if isinstance(v, (int, float)):  # numbers first (most entries; bool is an int): cheaper than Mapping's check
+            out[key] = float(v)
+        elif isinstance(v, Mapping):
             out.update(_flatten(v, key + "."))
-        elif isinstance(v, bool):
-            out[key] = float(v)
-        elif isinstance(v, (int, float)):
-            out[key] = float(v)
         elif k == "events":
             continue  # per-event records (sensor losses) are summarised apart
         elif isinstance(v, list) and v and all(isinstance(x, Mapping) for x in v):

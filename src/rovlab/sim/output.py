@@ -87,12 +87,15 @@ def write_run(out_dir: str | Path, result: SimResult, metrics: Mapping[str, Any]
 
 def write_monte_carlo(out_dir: str | Path, scenario_name: str, summary: Mapping[str, Any],
                       runs: Sequence[Mapping[str, Any]], t: np.ndarray, description: str = "",
-                      notes: list[str] | None = None) -> dict[str, Path]:
+                      notes: list[str] | None = None, *, figures: bool = True) -> dict[str, Path]:
+    """monte_carlo/metrics.json, and with ``figures`` the NEES over the runs (nees.png)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = {"metrics.json": write_json(out / "metrics.json", {"monte_carlo": summary})}
     notes = notes if notes is not None else []
     figs = []
+    if not figures:
+        return written
     try:
         nees = np.array([r["nees"] for r in runs], dtype=float)
         if "nees" in summary:

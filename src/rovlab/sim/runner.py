@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -216,7 +216,8 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     dropout, refs = schedule(sc, est.channels, times)
     heave, pset = disturbances(sc, times, observer=sc.plant == "observer", g=truth.gravity)
 
-    # plant: initial state, then every draw of the run in a fixed order (rovlab.sim.loop.draw)
+    # plant: initial state, then every draw of the run in a fixed order (rovlab.sim.loop.draw);
+    # reseed() redoes exactly these draws for another seed: keep the two in step
     bias0 = sc.bias_std * rng.standard_normal(4)  # start in the stationary distribution
     plant = make_plant(design, sc, truth, n_sub, bias0)
     normals = draw(rng, n_ctrl, n_sub, plant_draws(plant), len(est.channels))
@@ -232,6 +233,26 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     nees = [i for i, q in enumerate(est.nav) if sc.plant == "observer" or not q.startswith("b_")]
     return Prepared(sc, vehicle, truth, config, design, plant, sensors, actuators, drive, n_ctrl, h, nav_of,
                     np.array(nees, dtype=np.int64))
+
+
+def reseed(prep: Prepared, seed: int) -> Prepared:
+    """The same run with another seed: equal to ``prepare`` of the same scenario with ``seed``
+    when the scenario has no distributions (rovlab.sim.scenario.has_distributions; with them,
+    the scenario's own values depend on the seed: call prepare). Only what is drawn from the
+    seed is redone -- the plant's initial bias and the run's draws, in prepare's order -- and
+    the design, sensors, actuators, schedule and disturbances are shared with ``prep``, so a
+    Monte Carlo prepares once and reseeds per run."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    sc = replace(prep.scenario, seed=int(seed))
+    rng = np.random.default_rng(sc.seed)
+    bias0 = sc.bias_std * rng.standard_normal(4)  # prepare's first draw, also for the observer plant
+    plant = prep.plant
+    if isinstance(plant, ProcessPlant):
+        plant = plant._replace(bias=np.asarray(bias0, dtype=float).copy())
+    plant_n, bias_n, sensor_n = draw(rng, prep.n_ctrl, plant.n_sub, plant_draws(plant), len(prep.channels))
+    drive = prep.drive._replace(plant_normals=plant_n, bias_normals=bias_n, sensor_normals=sensor_n)
+    return replace(prep, scenario=sc, plant=plant, drive=drive)
 
 
 def sensor_bank(channels: tuple[Any, ...], truth: Vehicle, h: float) -> SensorBank:

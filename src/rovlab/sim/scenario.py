@@ -218,6 +218,18 @@ def scenario_from_dict(data: Mapping[str, Any], *, file: str = "<dict>", seed: i
     return _read(concrete, col, file, seed)  # raises with every problem, the draw's included
 
 
+def has_distributions(data: Mapping[str, Any]) -> bool:
+    """Whether a scenario's raw TOML has any distribution table (so its values depend on the seed)."""
+    def walk(node: Any) -> bool:
+        if isinstance(node, Mapping):
+            return "dist" in node or any(walk(v) for v in node.values())
+        if isinstance(node, list):
+            return any(walk(v) for v in node)
+        return False
+
+    return walk(data)
+
+
 def _draw(node: Any, rng: np.random.Generator, col: Collector, path: str) -> Any:
     """Replace every distribution table by a sample (depth-first, in file order)."""
     if isinstance(node, dict):
