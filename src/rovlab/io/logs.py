@@ -442,14 +442,6 @@ class LogStream:
         _raise(problems)
 
 
-def _string_array(pa, texts: Sequence[str]):
-    """A pyarrow string array built from its buffers (no pandas import)."""
-    data = [t.encode("utf-8") for t in texts]
-    offsets = np.zeros(len(data) + 1, dtype=np.int32)
-    np.cumsum([len(d) for d in data], out=offsets[1:])
-    return pa.Array.from_buffers(pa.string(), len(data), [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(data))])
-
-
 def _float_array(chunk) -> np.ndarray:
     """A pyarrow float64 array as numpy, nulls as NaN, read from its buffers (pyarrow's own
     to_numpy imports pandas for arrays with nulls: 0.4 s)."""
@@ -514,23 +506,24 @@ class ChunkWriter:
 
     Atomic like :func:`write_csv`: rows go to a temporary file renamed over ``target`` by
     :meth:`close`; :meth:`abort` (or an exception inside ``with``) removes it, so a refused or
-    interrupted run leaves no half-written output. ``-`` writes to standard output. With pyarrow
-    (the ``arrow`` extra) chunks are rounded and formatted on a worker thread (pyarrow's writer
-    releases the GIL, so this overlaps the caller's next chunk; two workers measured no faster on
-    two cores and used more memory) and written in order, at most three chunks in flight;
-    Python formats them otherwise.
+    interrupted run leaves no half-written output. ``-`` writes to standard output. Chunks are
+    rounded and formatted by the compiled loop of :mod:`rovlab.io.csvtext` on a worker thread
+    (it releases the GIL, so this overlaps the caller's next chunk) and written in order, at most
+    three chunks in flight. The numbers are laid out as pyarrow's CSV writer lays them out
+    (``0.000001``, ``9.99e-7``, ``1e+10``), with or without pyarrow installed.
     """
 
     _IN_FLIGHT = 3
 
     def __init__(self, target: str | Path, names: Sequence[str], *, comments: Iterable[str] = (),
                  significant: int | None = None, exact: Iterable[str] = ()) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
         self.names = list(names)
         self.target = str(target)
         self.significant = significant
         self.exact = set(exact)
         self._tmp: Path | None = None
-        self._pool = None
         self._pending: list = []
         if self.target == "-":
             self._f = sys.stdout.buffer
@@ -538,70 +531,42 @@ class ChunkWriter:
             path = Path(target)
             self._tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
             self._f = open(self._tmp, "wb")
-        try:
-            import pyarrow
-            import pyarrow.csv  # noqa: F401
-            self._pa = pyarrow
-        except ImportError:
-            self._pa = None
         head = "".join(f"# {line}\n" for line in comments) + ",".join(_quote(n) for n in self.names) + "\n"
         self._f.write(head.encode("utf-8"))
-        if self._pa is not None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rovlab-csv")
+        self._pool: Any = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rovlab-csv")
 
     def _floats(self, name: str, col: np.ndarray) -> np.ndarray:
         if self.significant is not None and name not in self.exact:
             return round_significant(col, self.significant)
         return col
 
-    def _format(self, columns: Mapping[str, Any]) -> Any:
-        """One chunk as CSV bytes (a pyarrow buffer), on a worker thread."""
-        pa = self._pa
-        arrays = []
-        # arrays built from their buffers: pa.array() imports pandas (0.4 s) to inspect its input
+    def _format(self, columns: Mapping[str, Any]) -> bytes:
+        """One chunk as CSV bytes, on the worker thread."""
+        from rovlab.io.csvtext import csv_rows
+
+        cols: list[Any] = []
         for name in self.names:
             col = columns[name]
             if isinstance(col, tuple):
-                codes, labels = col
-                codes = np.ascontiguousarray(codes, dtype=np.int32)
-                index = pa.Array.from_buffers(pa.int32(), codes.size, [None, pa.py_buffer(codes)])
-                arrays.append(pa.DictionaryArray.from_arrays(index, _string_array(pa, labels)).cast(pa.string()))
+                cols.append(col)
             elif isinstance(col, np.ndarray) and col.dtype.kind == "f":
-                col = np.ascontiguousarray(self._floats(name, col), dtype=np.float64)
-                nan = np.isnan(col)  # NaN -> null -> empty cell
-                nulls = int(np.count_nonzero(nan))
-                valid = pa.py_buffer(np.packbits(~nan, bitorder="little")) if nulls else None
-                arrays.append(pa.Array.from_buffers(pa.float64(), col.size, [valid, pa.py_buffer(col)],
-                                                    null_count=nulls))
-            else:
-                arrays.append(col if isinstance(col, pa.Array) else _string_array(pa, [str(v) for v in col]))
-        sink = pa.BufferOutputStream()
-        pa.csv.write_csv(pa.Table.from_arrays(arrays, names=self.names), sink,
-                         write_options=pa.csv.WriteOptions(include_header=False, quoting_style="none"))
-        return sink.getvalue()
+                cols.append(self._floats(name, col))
+            else:  # text (or integers, written exactly): as codes into its distinct values
+                texts = [str(v) for v in (col.tolist() if hasattr(col, "tolist") else col)]
+                labels = sorted(set(texts))
+                code = {text: i for i, text in enumerate(labels)}
+                cols.append((np.array([code[text] for text in texts], dtype=np.int64), labels))
+        return csv_rows(cols)
 
     def write(self, columns: Mapping[str, np.ndarray | Sequence[str] | tuple[np.ndarray, Sequence[str]]]) -> None:
         """Append rows: each column a float array, a sequence of strings, or (codes, labels): the
         label of each integer code (written without building one string per row). The arrays
         must not be modified afterwards (they may still be formatting)."""
-        if self._pool is not None:
-            self._pending.append(self._pool.submit(self._format, dict(columns)))
-            while len(self._pending) >= self._IN_FLIGHT:
-                self._f.write(self._pending.pop(0).result())
-            return
-        cols = []
-        for name in self.names:
-            col = columns[name]
-            if isinstance(col, tuple):
-                codes, labels = col
-                cols.append(np.asarray(list(labels), dtype=object)[np.asarray(codes, dtype=np.intp)].tolist())
-            elif isinstance(col, np.ndarray) and col.dtype.kind == "f":
-                cols.append(["" if v != v else repr(v) for v in self._floats(name, col).tolist()])
-            else:
-                cols.append([str(v) for v in (col.tolist() if hasattr(col, "tolist") else col)])
-        self._f.write("".join(",".join(row) + "\n" for row in zip(*cols)).encode("utf-8"))
+        if self._pool is None:
+            raise ValueError(f"{self.target}: the writer is closed")
+        self._pending.append(self._pool.submit(self._format, dict(columns)))
+        while len(self._pending) >= self._IN_FLIGHT:
+            self._f.write(self._pending.pop(0).result())
 
     def _drain(self, keep: bool) -> None:
         pending, self._pending = self._pending, []
