@@ -13,10 +13,11 @@ m = round(|x| 10^k), k = d - 1 - floor(log10 |x|), and keeps the first m for whi
 correctly rounded, so equality means the decimal m 10^-k reads back as x; with at most 15 digits
 round(|x| 10^k) is the nearest d-digit decimal, so the first d that passes is the shortest length
 above 9, and any shorter form is m without its trailing zeros (two decimals of at most 10 digits
-are further apart than one unit in the last place of a double). Values rounded to 10 significant
-digits (what the filter writes) pass at d = 10. A value needing 16 or 17 digits, or too small or
-too large for exact powers of ten (|x| < 1e-13 or > 1e31), is left to Python's ``repr`` (the
-shortest digits, by David Gay's algorithm) and laid out the same way: :func:`format_float`.
+are further apart than one unit in the last place of a double). A value needing 16 or 17 digits,
+or too small or too large for exact powers of ten (|x| < 1e-13 or > 1e31), is left to Python's
+``repr`` (the shortest digits, by David Gay's algorithm) and laid out the same way:
+:func:`format_float`. Columns written to s significant digits are rounded in the same pass,
+exactly as :func:`rovlab.io.logs.round_significant` rounds (see :func:`_rounded`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
+_TENS0 = 330
+_TENS = np.array([float(f"1e{j}") for j in range(-_TENS0, 310)])  # the double nearest 10^j (correctly rounded)
 _FLOAT_WIDTH = 26  # "-0.000001" + 15 digits, or "-1.23456789012345e-308" (+ the comma)
 _MARK = 1  # byte standing for a value formatted in Python afterwards
 
@@ -73,6 +76,35 @@ def format_float(v: float) -> str:
 # the kernel
 # --------------------------------------------------------------------------------------------
 
+@njit(cache=True, nogil=True, inline="always")
+def _fill(m, nd, pairs, dig):
+    """The nd digits of the whole number m (< 1e16) into dig without the trailing zeros: their count."""
+    q = np.int64(m)
+    if nd > 8:  # two 32-bit halves, two digits at a time
+        hi = np.uint32(q // 100_000_000)
+        lo = np.uint32(q - np.int64(hi) * 100_000_000)
+        i = nd
+        for _ in range(4):
+            r = lo % np.uint32(100)
+            lo //= np.uint32(100)
+            dig[i - 1] = pairs[2 * r + 1]
+            dig[i - 2] = pairs[2 * r]
+            i -= 2
+        while i > 0:
+            dig[i - 1] = np.uint8(48 + hi % np.uint32(10))
+            hi //= np.uint32(10)
+            i -= 1
+    else:
+        u = np.uint32(q)
+        for i in range(nd - 1, -1, -1):
+            dig[i] = np.uint8(48 + u % np.uint32(10))
+            u //= np.uint32(10)
+    n = nd
+    while n > 1 and dig[n - 1] == 48:
+        n -= 1
+    return n
+
+
 @njit(cache=True, nogil=True)
 def _digits(a, p10, pairs, dig):
     """Shortest digits of a finite a > 0 into dig: (count, exponent of the first digit), or
@@ -98,32 +130,44 @@ def _digits(a, p10, pairs, dig):
             return 0, 0
         back = m / p10[k] if k >= 0 else m * p10[-k]
         if back == a:
-            # d digits of m (< 1e15) as two 32-bit halves, two digits at a time; then drop
-            # the trailing zeros
-            q = np.int64(m)
-            hi = np.uint32(q // 100_000_000)
-            lo = np.uint32(q - np.int64(hi) * 100_000_000)
-            i = d
-            for _ in range(4):
-                r = lo % np.uint32(100)
-                lo //= np.uint32(100)
-                dig[i - 1] = pairs[2 * r + 1]
-                dig[i - 2] = pairs[2 * r]
-                i -= 2
-            while i > 0:
-                dig[i - 1] = np.uint8(48 + hi % np.uint32(10))
-                hi //= np.uint32(10)
-                i -= 1
-            n = d
-            while dig[n - 1] == 48:
-                n -= 1
-            return n, e
+            return _fill(m, d, pairs, dig), e
     return 0, 0
 
 
-@njit(cache=True, nogil=True)
-def _put_float(v, out, pos, p10, pairs, dig):
-    """Write the finite or infinite v at out[pos:]: the new position, or -1 if left to Python."""
+@njit(cache=True, nogil=True, inline="always")
+def _rounded(a, bits, s, p10, tens, pairs, dig):
+    """Digits of a finite a > 0 (``bits``: its IEEE bits) rounded to s significant digits as
+    rovlab.io.logs.round_significant rounds (m = rint(a 10^k), k = s - 1 - floor(log10 a)), whose
+    shortest form they are (the double nearest m 10^-k; two decimals of at most 11 digits are
+    further apart than a unit in the last place): (count, exponent); (0, 0) when |k| > 23, where
+    round_significant leaves the value as it is; (-1, 0) when |k| is 22 or 23: left to Python.
+
+    floor(log10 a) from the binary exponent b: floor(b log10 2) or one more, decided against the
+    double nearest the power of ten (``tens``). It can differ from numpy's rounded log10 only
+    within an ulp of a power of ten, where either k gives the same digits, unless one of them
+    crosses |k| = 22, where round_significant stops rounding: those few go to Python."""
+    b = np.int64((bits >> 52) & 0x7FF) - 1023
+    if b < -1022:
+        return 0, 0  # subnormal: |k| > 23
+    e = (b * 78913) >> 18  # floor(b log10 2), exact for |b| < 1650
+    if a >= tens[e + 1 + _TENS0]:
+        e += 1
+    k = s - 1 - e
+    if k > 23 or k < -23:
+        return 0, 0
+    if k > 21 or k < -21:
+        return -1, 0
+    m = np.rint(a * p10[k]) if k >= 0 else np.rint(a / p10[-k])
+    nd = max(1, s - 1)
+    while m >= p10[nd]:
+        nd += 1
+    return _fill(m, nd, pairs, dig), nd - 1 - k
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put_float(v, bits, s, out, pos, p10, tens, pairs, dig):
+    """Write the finite or infinite v (rounded to s significant digits unless s == 0) at
+    out[pos:]: the new position, or -1 if left to Python."""
     if v < 0.0 or (v == 0.0 and math.copysign(1.0, v) < 0.0):
         out[pos] = 45  # '-'
         pos += 1
@@ -136,7 +180,11 @@ def _put_float(v, out, pos, p10, pairs, dig):
         out[pos + 1] = 110
         out[pos + 2] = 102
         return pos + 3
-    n, e = _digits(a, p10, pairs, dig)
+    n, e = _rounded(a, bits, s, p10, tens, pairs, dig) if s > 0 else (0, 0)
+    if n < 0:
+        return -1
+    if n == 0:
+        n, e = _digits(a, p10, pairs, dig)
     if n == 0:
         return -1
     if -6 <= e <= 9:
@@ -178,8 +226,9 @@ def _put_float(v, out, pos, p10, pairs, dig):
 
 
 @njit(cache=True, nogil=True)
-def _rows(F, codes, kinds, index, lab, lab_off, out, left):
-    """The CSV rows: column c is float column index[c] of F (kinds[c] == 0) or label column
+def _rows(F, Fbits, sig, codes, kinds, index, lab, lab_off, out, left):
+    """The CSV rows: column c is float column index[c] of F (kinds[c] == 0; rounded to sig[c]
+    significant digits unless 0) or label column
     index[c] of codes (kinds[c] == 1, text lab[lab_off[code]:lab_off[code + 1]]). Returns the
     bytes written and the number of values left to Python (their F index in left[:, 0..1],
     a _MARK byte where each goes)."""
@@ -188,6 +237,7 @@ def _rows(F, codes, kinds, index, lab, lab_off, out, left):
     for i in range(23):
         p10[i] = p
         p *= 10.0
+    tens = _TENS
     pairs = np.empty(200, dtype=np.uint8)  # "00", "01", ..., "99"
     for i in range(100):
         pairs[2 * i] = 48 + i // 10
@@ -205,7 +255,7 @@ def _rows(F, codes, kinds, index, lab, lab_off, out, left):
                 v = F[r, j]
                 if v != v:
                     continue
-                end = _put_float(v, out, pos, p10, pairs, dig)
+                end = _put_float(v, Fbits[r, j], sig[c], out, pos, p10, tens, pairs, dig)
                 if end < 0:
                     out[pos] = _MARK
                     pos += 1
@@ -224,11 +274,19 @@ def _rows(F, codes, kinds, index, lab, lab_off, out, left):
     return pos, n_left
 
 
-def csv_rows(columns: Sequence[np.ndarray | tuple[np.ndarray, Sequence[str]]]) -> bytes:
-    """Equally long columns as CSV rows (no header, no quoting): each column a float array or
-    (integer codes, labels), the label of each code."""
+def csv_rows(columns: Sequence[np.ndarray | tuple[np.ndarray, Sequence[str]]],
+             significant: Sequence[int | None] | None = None) -> bytes | memoryview:
+    """Equally long columns as CSV rows (no header, no quoting), UTF-8: each column a float array
+    or (integer codes, labels), the label of each code. ``significant[c]``: write float column c
+    rounded to that many significant digits, as ``rovlab.io.logs.round_significant`` rounds
+    (None: exactly)."""
     if not columns:
         raise ValueError("no columns to write")
+    if significant is None:
+        significant = [None] * len(columns)
+    if len(significant) != len(columns) or any(d is not None and not 1 <= d <= 15 for d in significant):
+        raise ValueError("significant: one entry per column, None or 1..15 digits")
+    sig = np.array([d or 0 for d in significant], dtype=np.int64)
     floats: list[np.ndarray] = []
     label_cols: list[np.ndarray] = []
     texts: list[list[bytes]] = []
@@ -274,13 +332,19 @@ def csv_rows(columns: Sequence[np.ndarray | tuple[np.ndarray, Sequence[str]]]) -
     np.cumsum([len(s) for s in all_labels], out=lab_off[1:])
     out = np.empty(n * width, dtype=np.uint8)
     left = np.empty((n * len(floats), 2), dtype=np.int64)
-    size, n_left = _rows(F, codes2, kinds, index, lab, lab_off, out, left)
-    text = out[:size].tobytes()
+    size, n_left = _rows(F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
     if not n_left:
-        return text
-    parts = text.split(bytes([_MARK]))
+        return memoryview(out)[:size]  # no copy: pages past size were never touched
+    from rovlab.io.logs import round_significant
+
+    float_digits = [d for d, kind in zip(significant, kinds) if kind == 0]
+    parts = out[:size].tobytes().split(bytes([_MARK]))
     pieces = [parts[0]]
     for i in range(n_left):
-        pieces.append(format_float(float(F[left[i, 0], left[i, 1]])).encode("ascii"))
+        value = F[left[i, 0], left[i, 1]:left[i, 1] + 1]
+        digits = float_digits[left[i, 1]]
+        if digits:
+            value = round_significant(value, digits)
+        pieces.append(format_float(float(value[0])).encode("ascii"))
         pieces.append(parts[i + 1])
     return b"".join(pieces)
