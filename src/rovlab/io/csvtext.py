@@ -230,8 +230,8 @@ def _rows(F, Fbits, sig, codes, kinds, index, lab, lab_off, out, left):
     """The CSV rows: column c is float column index[c] of F (kinds[c] == 0; rounded to sig[c]
     significant digits unless 0) or label column
     index[c] of codes (kinds[c] == 1, text lab[lab_off[code]:lab_off[code + 1]]). Returns the
-    bytes written and the number of values left to Python (their F index in left[:, 0..1],
-    a _MARK byte where each goes)."""
+    bytes written and the number of values left to Python (a _MARK byte where each goes; the F
+    index of the first len(left) in left[:, 0..1])."""
     p10 = np.empty(23)
     p = 1.0
     for i in range(23):
@@ -259,8 +259,9 @@ def _rows(F, Fbits, sig, codes, kinds, index, lab, lab_off, out, left):
                 if end < 0:
                     out[pos] = _MARK
                     pos += 1
-                    left[n_left, 0] = r
-                    left[n_left, 1] = j
+                    if n_left < left.shape[0]:
+                        left[n_left, 0] = r
+                        left[n_left, 1] = j
                     n_left += 1
                 else:
                     pos = end
@@ -331,8 +332,11 @@ def csv_rows(columns: Sequence[np.ndarray | tuple[np.ndarray, Sequence[str]]],
     lab_off = np.zeros(len(all_labels) + 1, dtype=np.int64)
     np.cumsum([len(s) for s in all_labels], out=lab_off[1:])
     out = np.empty(n * width, dtype=np.uint8)
-    left = np.empty((n * len(floats), 2), dtype=np.int64)
+    left = np.empty((64, 2), dtype=np.int64)  # values left to Python are rare
     size, n_left = _rows(F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
+    if n_left > left.shape[0]:
+        left = np.empty((n_left, 2), dtype=np.int64)
+        size, n_left = _rows(F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
     if not n_left:
         return memoryview(out)[:size]  # no copy: pages past size were never touched
     from rovlab.io.logs import round_significant

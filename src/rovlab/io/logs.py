@@ -182,8 +182,8 @@ def _check_header(file: str, header: list[str] | None, header_line: int, need: S
 # Streaming: long logs in chunks, memory flat
 # --------------------------------------------------------------------------------------------
 
-CHUNK_ROWS = 1 << 13  # ~0.5 MiB blocks: peak memory grows with the block (1 << 14: +20 MiB), speed does not
-PREFETCH = 4  # chunks parsed ahead by the reader thread (~0.4 MiB each with six columns)
+CHUNK_ROWS = 1 << 12  # ~256 KiB blocks: peak memory grows with the block (1 << 14: +13 MiB), speed does not
+PREFETCH = 4  # chunks parsed ahead by the reader thread (~0.2 MiB each with six columns)
 
 
 @dataclass(frozen=True, eq=False)
