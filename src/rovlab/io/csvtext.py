@@ -338,7 +338,7 @@ def csv_rows(columns: Sequence[np.ndarray | tuple[np.ndarray, Sequence[str]]],
         left = np.empty((n_left, 2), dtype=np.int64)
         size, n_left = _rows(F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
     if not n_left:
-        return memoryview(out)[:size]  # no copy: pages past size were never touched
+        return out.data[:size]  # no copy: pages past size were never touched
     from rovlab.io.logs import round_significant
 
     float_digits = [d for d, kind in zip(significant, kinds) if kind == 0]
