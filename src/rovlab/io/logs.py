@@ -571,8 +571,8 @@ class ChunkWriter:
     Atomic like :func:`write_csv`: rows go to a temporary file renamed over ``target`` by
     :meth:`close`; :meth:`abort` (or an exception inside ``with``) removes it, so a refused or
     interrupted run leaves no half-written output. ``-`` writes to standard output. Chunks are
-    rounded and formatted by the compiled loop of :mod:`rovlab.io.csvtext` on a worker thread
-    (it releases the GIL, so this overlaps the caller's next chunk) and written in order, at most
+    rounded and formatted by the compiled loop of :mod:`rovlab.io.csvtext` and written, in order,
+    by a worker thread (both release the GIL, so this overlaps the caller's next chunk), at most
     two chunks in flight. The numbers are laid out as pyarrow's CSV writer lays them out
     (``0.000001``, ``9.99e-7``, ``1e+10``), with or without pyarrow installed.
     """
@@ -626,16 +626,20 @@ class ChunkWriter:
         must not be modified afterwards (they may still be formatting)."""
         if self._pool is None:
             raise ValueError(f"{self.target}: the writer is closed")
-        self._pending.append(self._pool.submit(self._format, dict(columns)))
+        self._pending.append(self._pool.submit(self._write, dict(columns)))
         while len(self._pending) >= self._IN_FLIGHT:
-            self._f.write(self._pending.pop(0).result())
+            self._pending.pop(0).result()  # raises what formatting or writing raised
+
+    def _write(self, columns: Mapping[str, Any]) -> None:
+        """Format and write one chunk, on the worker thread (one worker: in order)."""
+        self._f.write(self._format(columns))
 
     def _drain(self, keep: bool) -> None:
         pending, self._pending = self._pending, []
         try:
             for future in pending:
                 if keep:
-                    self._f.write(future.result())
+                    future.result()
                 else:
                     future.cancel()
         finally:
