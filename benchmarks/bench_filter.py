@@ -254,7 +254,7 @@ def whole_process() -> None:
         long_runs = [_child(ours[:4] + [str(log_long), "--out", str(work_path / "est6.csv")], work)
                      for _ in range(2)]
         a = np.loadtxt(work_path / "peer.csv", delimiter=",", skiprows=1, max_rows=LONG)
-        b = np.loadtxt(work_path / "est.csv", delimiter=",", comments="#", skiprows=3, usecols=range(13))
+        b = np.loadtxt(work_path / "est.csv", delimiter=",", skiprows=1, usecols=range(13))  # header, no comments
         d = a - b
         d[:, 2] = np.remainder(d[:, 2] + np.pi, 2 * np.pi) - np.pi
         z_diff = float(np.max(np.abs(d[:, 1])))

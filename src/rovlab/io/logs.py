@@ -456,36 +456,17 @@ class LogStream:
 
 class _Prefetch(Iterator[LogChunk]):
     """The items of ``items`` produced on a worker thread, at most ``depth`` ahead of the
-    consumer; an exception is raised to the consumer where it occurred in the sequence."""
+    consumer; an exception is raised to the consumer where it occurred in the sequence. The
+    thread stops when the items end, on :meth:`close`, or when this iterator is dropped (it holds
+    no reference to it)."""
 
     def __init__(self, items: Iterator[LogChunk], depth: int) -> None:
         self._queue: queue.Queue = queue.Queue(maxsize=max(1, depth))
         self._stop = threading.Event()
         self._done = False
-        self._thread = threading.Thread(target=self._run, args=(items,), name="rovlab-log-reader", daemon=True)
+        self._thread = threading.Thread(target=_produce, args=(items, self._queue, self._stop),
+                                        name="rovlab-log-reader", daemon=True)
         self._thread.start()
-
-    def _run(self, items: Iterator[LogChunk]) -> None:
-        try:
-            for item in items:
-                if not self._put((True, item)):
-                    return  # closed by the consumer
-            self._put((False, None))
-        except BaseException as exc:  # noqa: B036 -- handed to the consumer, raised there
-            self._put((False, exc))
-        finally:
-            close = getattr(items, "close", None)
-            if close is not None:
-                close()
-
-    def _put(self, entry: tuple[bool, Any]) -> bool:
-        while not self._stop.is_set():
-            try:
-                self._queue.put(entry, timeout=0.05)
-                return True
-            except queue.Full:
-                continue
-        return False
 
     def __next__(self) -> LogChunk:
         if self._done:
@@ -504,6 +485,35 @@ class _Prefetch(Iterator[LogChunk]):
         self._done = True
         self._stop.set()
         self._thread.join()
+
+    def __del__(self) -> None:
+        self._stop.set()
+
+
+def _produce(items: Iterator[LogChunk], out: queue.Queue, stop: threading.Event) -> None:
+    """The reader thread of :class:`_Prefetch`: (True, item) per item, then (False, None) or
+    (False, exception)."""
+
+    def put(entry: tuple[bool, Any]) -> bool:
+        while not stop.is_set():
+            try:
+                out.put(entry, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    try:
+        for item in items:
+            if not put((True, item)):
+                return  # closed by the consumer
+        put((False, None))
+    except BaseException as exc:  # noqa: B036 -- handed to the consumer, raised there
+        put((False, exc))
+    finally:
+        close = getattr(items, "close", None)
+        if close is not None:
+            close()
 
 
 def _float_array(chunk) -> np.ndarray:
