@@ -57,7 +57,7 @@ def _load(args: argparse.Namespace, *, require_observable: bool = True, cached: 
 
     vehicle = load_vehicle(args.vehicle)
     config = load_design_config(args.config)
-    if cached:  # the design on disk from an earlier run: no scipy import (see cached_filter_model)
+    if cached:  # the design on disk from an earlier run (see cached_filter_model)
         return vehicle, config, cached_filter_model(vehicle, config)
     return vehicle, config, build_filter_model(vehicle, config, require_observable=require_observable)
 
