@@ -214,6 +214,8 @@ def _child(argv, cwd):
 
 
 def whole_process() -> None:
+    import math
+    import os
     import statistics
     import tempfile
 
@@ -246,13 +248,13 @@ def whole_process() -> None:
         ours = [sys.executable, "-m", "rovlab.interfaces.cli", "filter", str(log), "--out", str(work_path / "est.csv")]
         peer = [sys.executable, str(work_path / "peer.py"), str(log), str(work_path / "peer.csv"),
                 str(work_path / "model.npz")]
-        _child(ours, work)  # compiles (or loads) the numba cache: the rows below are warm
+        _child(ours, work)  # compiles (or loads) the numba cache and stores the design: the rows below are warm
         runs = [_child(ours, work) for _ in range(5)]
         peers = [_child(peer, work) for _ in range(2)]
         long_runs = [_child(ours[:4] + [str(log_long), "--out", str(work_path / "est6.csv")], work)
                      for _ in range(2)]
         a = np.loadtxt(work_path / "peer.csv", delimiter=",", skiprows=1, max_rows=LONG)
-        b = np.loadtxt(work_path / "est.csv", delimiter=",", comments="#", skiprows=3, usecols=range(13))
+        b = np.loadtxt(work_path / "est.csv", delimiter=",", skiprows=1, usecols=range(13))  # header, no comments
         d = a - b
         d[:, 2] = np.remainder(d[:, 2] + np.pi, 2 * np.pi) - np.pi
         z_diff = float(np.max(np.abs(d[:, 1])))
@@ -262,7 +264,9 @@ def whole_process() -> None:
         return statistics.median(ts), ts[0], ts[-1], max(mm for _, mm in rs)
 
     o, p, lg = med(runs), med(peers), med(long_runs)
-    print(f"\nwhole processes, {LONG} rows (warm numba cache), median [range], peak RSS:")
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (math.nan,) * 3
+    print(f"\nwhole processes, {LONG} rows (warm numba and design caches), median [range], peak RSS; "
+          f"load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} cores:")
     print(f"  pandas + filterpy script     {p[0]:7.2f} s [{p[1]:.2f}-{p[2]:.2f}]  {p[3]:6.0f} MiB")
     print(f"  rovlab filter                {o[0]:7.2f} s [{o[1]:.2f}-{o[2]:.2f}]  {o[3]:6.0f} MiB   "
           f"speed-up {p[0] / o[0]:.1f}x (range {p[1] / o[2]:.1f}-{p[2] / o[1]:.1f}x)")

@@ -14,6 +14,30 @@ from pathlib import Path
 __version__ = "0.1.0"
 
 
+_digest: list[str | None] = []
+
+
+def source_digest() -> str | None:
+    """SHA-1 (hex) of the version and every source file of this package (None if unreadable):
+    the key of what rovlab caches on disk (compiled kernels, designed filters)."""
+    if not _digest:
+        root = Path(__file__).resolve().parent
+        digest = hashlib.sha1(__version__.encode())
+        try:
+            for path in sorted(root.rglob("*.py")):
+                digest.update(f"{path.relative_to(root)}:".encode())
+                digest.update(path.read_bytes())
+            _digest.append(digest.hexdigest())
+        except OSError:
+            _digest.append(None)
+    return _digest[0]
+
+
+def cache_home() -> Path:
+    """rovlab's folder of caches: $XDG_CACHE_HOME/rovlab or ~/.cache/rovlab."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "rovlab"
+
+
 def _numba_cache_dir() -> None:
     """Point numba's on-disk cache at a folder keyed by this package's sources.
 
@@ -26,14 +50,11 @@ def _numba_cache_dir() -> None:
     """
     if "NUMBA_CACHE_DIR" in os.environ:
         return
-    root = Path(__file__).resolve().parent
-    digest = hashlib.sha1(__version__.encode())
+    digest = source_digest()
+    if digest is None:
+        return
     try:
-        for path in sorted(root.rglob("*.py")):
-            digest.update(f"{path.relative_to(root)}:".encode())
-            digest.update(path.read_bytes())
-        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "rovlab" / "numba"
-        folder = base / digest.hexdigest()[:16]
+        folder = cache_home() / "numba" / digest[:16]
         folder.mkdir(parents=True, exist_ok=True)
     except OSError:
         return  # read-only home and the like: numba falls back to its own default

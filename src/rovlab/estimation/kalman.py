@@ -358,7 +358,7 @@ def kf_step(model, x, P, ch, t, u, y, present, xc, Pc, rep, work):
     return step_arrays(Delta, Q, H, cfg, wrap, sp, x, P, ch, t, u, y, present, xc, Pc, rep, work)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # only arrays: a log's reader and writer threads run alongside
 def kf_run(model, x, P, ch, t, u, y, present, n_predict, X, V, status, reason, event, innov, S, flags):
     Phi, Delta, Q, H, cfg, wrap, sp = unpack_model(model)
     N = t.shape[0]

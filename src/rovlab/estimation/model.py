@@ -15,10 +15,9 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg import null_space, qr
-from scipy.special import gammaincinv  # not scipy.stats: its import alone takes ~0.7 s
 
-from rovlab.models.discretise import discretise
+# scipy (the discretisation, the observability test, chi-square quantiles) is imported where the
+# design needs it, so that importing the filter (and loading a cached design) does not
 from rovlab.models.linear import HeaveYawParams, observer_model
 from rovlab.params.design import INPUTS, OBSERVER_STATES, DesignConfig
 from rovlab.params.validate import ConfigError, Problem
@@ -29,6 +28,8 @@ STATES = OBSERVER_STATES
 
 def _chi2_ppf(p: float, dof: int) -> float:
     """Quantile of the chi-square distribution (= scipy.stats.chi2.ppf(p, dof))."""
+    from scipy.special import gammaincinv  # not scipy.stats: its import alone takes ~0.7 s
+
     return float(2.0 * gammaincinv(0.5 * dof, p))
 
 _STATE_OF_QUANTITY = {"z": 0, "psi": 1, "w": 2, "r": 3}
@@ -163,6 +164,8 @@ def unobservable_subspace(A: np.ndarray, H: np.ndarray, *, rtol: float = 1e-9) -
     matrix tested, so widely different time scales (bias time constants of 1844 s next to
     damping of 0.3 1/s) do not matter the way they do in the rank of [H; HA; ...; HA^5].
     """
+    from scipy.linalg import null_space
+
     A = np.asarray(A, dtype=float)
     n = A.shape[0]
     H = np.asarray(H, dtype=float).reshape(-1, n)
@@ -179,6 +182,8 @@ def unobservable_subspace(A: np.ndarray, H: np.ndarray, *, rtol: float = 1e-9) -
 
 def _pivot_basis(V: np.ndarray) -> np.ndarray:
     """Rotate a subspace basis so that each column is 1 on its own pivot state."""
+    from scipy.linalg import qr
+
     if V.shape[1] == 0:
         return V
     _, _, piv = qr(V.T, pivoting=True)
@@ -259,6 +264,7 @@ def startup_time(Phi: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, P
 def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observable: bool = True
                        ) -> FilterModel:
     """Assemble Phi, Delta, Gamma, Q, H, R and the channels; raise ConfigError on any problem."""
+    from rovlab.models.discretise import discretise
 
     file = config.file or config.name
     params = HeaveYawParams.from_values(**config.model_values(vehicle))
@@ -309,6 +315,47 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
         unobservable_directions=V,
     )
 
+
+
+def cached_filter_model(vehicle: Vehicle, config: DesignConfig) -> FilterModel:
+    """:func:`build_filter_model` (observable designs only), kept on disk after the first time.
+
+    For commands that run a designed filter and nothing else (``rovlab filter``): designing
+    (scipy.special's import, the discretisation, the observability and start-up analyses) costs
+    ~4 MiB of peak memory and a few tens of milliseconds of a run that is otherwise about a
+    second (numba imports scipy.linalg itself). The file is keyed on the vehicle and the
+    configuration as loaded (every value) and on rovlab's sources (:func:`rovlab.source_digest`),
+    so any change to either designs afresh; a refused design is never stored (it raises every
+    time), an unreadable or foreign file is ignored and a cache that cannot be written costs
+    nothing but the time.
+    """
+    import hashlib
+    import os
+    import pickle
+
+    from rovlab import cache_home, source_digest
+
+    digest = source_digest()
+    if digest is None:
+        return build_filter_model(vehicle, config)
+    key = hashlib.sha1(digest.encode() + pickle.dumps((vehicle, config), protocol=5)).hexdigest()
+    path = cache_home() / "design" / f"{key[:32]}.pickle"
+    try:
+        with open(path, "rb") as f:
+            stored = pickle.load(f)
+        if isinstance(stored, tuple) and len(stored) == 2 and stored[0] == key and isinstance(stored[1], FilterModel):
+            return stored[1]
+    except Exception:  # noqa: BLE001 -- no file, or a damaged one: design afresh
+        pass
+    model = build_filter_model(vehicle, config)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_bytes(pickle.dumps((key, model), protocol=5))
+        os.replace(tmp, path)
+    except OSError:
+        pass
+    return model
 
 
 def make_channels(vehicle: Vehicle, config: DesignConfig, state_of: dict[str, int], *, estimator: str

@@ -50,13 +50,15 @@ def _common(p: argparse.ArgumentParser) -> None:
                         "(default: default)")
 
 
-def _load(args: argparse.Namespace, *, require_observable: bool = True):
-    from rovlab.estimation.model import build_filter_model
+def _load(args: argparse.Namespace, *, require_observable: bool = True, cached: bool = False):
+    from rovlab.estimation.model import build_filter_model, cached_filter_model
     from rovlab.params.design import load_design_config
     from rovlab.params.vehicle import load_vehicle
 
     vehicle = load_vehicle(args.vehicle)
     config = load_design_config(args.config)
+    if cached:  # the design on disk from an earlier run (see cached_filter_model)
+        return vehicle, config, cached_filter_model(vehicle, config)
     return vehicle, config, build_filter_model(vehicle, config, require_observable=require_observable)
 
 
@@ -162,7 +164,7 @@ def _cmd_filter(args: argparse.Namespace) -> int:
 
     if args.max_gap_steps < 1:
         raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
-    vehicle, config, model = _load(args)
+    vehicle, config, model = _load(args, cached=True)
     _check_initial(config, model)
     with tempfile.TemporaryDirectory(prefix="rovlab-filter-") as tmp:
         return _filter(args, vehicle, config, model, _as_csv(args.log, vehicle, model, Path(tmp)))
@@ -214,6 +216,24 @@ def _mavlink_as_csv(log: str, vehicle, model, folder: Path) -> str:
 
 
 def _filter(args: argparse.Namespace, vehicle, config, model, log: str) -> int:
+    from rovlab.io.logs import LogStream
+
+    columns = [c.column for c in model.channels]
+    # a simulation's timeseries.csv names the samples meas_<quantity>_<sensor>: read those as they are
+    header = set(LogStream(log, required=("time_s",)).header)
+    source = {c: f"meas_{c}" if c not in header and f"meas_{c}" in header else c for c in columns}
+    stream = LogStream(log, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
+    chunks = iter(stream)  # with pyarrow a reader thread parses ahead from here (while the kernels load)
+    try:
+        return _filter_chunks(args, vehicle, config, model, stream, chunks, columns, source)
+    finally:
+        close = getattr(chunks, "close", None)
+        if close is not None:
+            close()
+
+
+def _filter_chunks(args: argparse.Namespace, vehicle, config, model, stream, chunks, columns: list[str],
+                   source: dict[str, str]) -> int:
     from rovlab.estimation.fusion import (
         EVENT_NONFINITE,
         EVENT_REJECTED,
@@ -225,15 +245,10 @@ def _filter(args: argparse.Namespace, vehicle, config, model, log: str) -> int:
     )
     from rovlab.estimation.kalman import DepthHeadingFilter, IntervalError, StreamingFilter
     from rovlab.interfaces.cli import UserError
-    from rovlab.io.logs import ChunkWriter, LogStream
+    from rovlab.io.logs import ChunkWriter
     from rovlab.io.tables import write_sidecar
 
     filt = DepthHeadingFilter(model)
-    columns = [c.column for c in model.channels]
-    # a simulation's timeseries.csv names the samples meas_<quantity>_<sensor>: read those as they are
-    header = set(LogStream(log, required=("time_s",)).header)
-    source = {c: f"meas_{c}" if c not in header and f"meas_{c}" in header else c for c in columns}
-    stream = LogStream(log, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
     runner = StreamingFilter(filt, max_gap_steps=args.max_gap_steps)
     m = len(columns)
     # status codes -> labels ('ok', 'lost-timeout', ...): code = 8 status + reason
@@ -279,7 +294,6 @@ def _filter(args: argparse.Namespace, vehicle, config, model, log: str) -> int:
         raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     with writer:
         try:
-            chunks = iter(stream)
             chunk = next(chunks, None)
             while chunk is not None:
                 nxt = next(chunks, None)
