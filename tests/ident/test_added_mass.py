@@ -5,6 +5,7 @@ from __future__ import annotations
 import tomllib
 from importlib import resources
 
+import numpy as np
 import pytest
 
 from rovlab.ident import IdentificationError
@@ -86,3 +87,23 @@ def test_bad_geometry_is_refused():
 def test_vehicle_without_geometry_is_refused(heavy_vehicle):
     with pytest.raises(IdentificationError, match="has no \\[geometry\\] block"):
         added_mass_from_vehicle(heavy_vehicle)
+
+
+def test_the_spline_is_scipys_not_a_knot_spline():
+    # rovlab's own spline (no scipy.interpolate import in `rovlab added-mass`) against scipy's
+    from scipy.interpolate import CubicSpline
+
+    from rovlab.ident.added_mass import _spline
+
+    data = tomllib.loads((resources.files("rovlab.ident") / "dnv_rp_h103.toml").read_text(encoding="utf-8"))
+    rect, prism = data["table_a1_rectangle"], data["table_a2_square_prism"]
+    for xs, ys in ((rect["a_over_b"], rect["C_A"]), (rect["a_over_b"], rect["beta"]),
+                   (prism["b_over_a"], prism["C_A"])):
+        x, y = np.array(xs), np.array(ys)
+        order = np.argsort(x)
+        ref = CubicSpline(x[order], y[order], bc_type="not-a-knot", extrapolate=True)
+        ours = _spline(x, y)
+        for q in np.linspace(0.5 * x.min(), 1.5 * x.max(), 301):  # inside and extrapolated
+            assert ours(q) == pytest.approx(float(ref(q)), rel=1e-12, abs=1e-12)
+    with pytest.raises(ValueError, match="at least 4 strictly increasing"):
+        _spline(np.array([1.0, 2.0, 2.0, 3.0]), np.zeros(4))

@@ -111,8 +111,7 @@ class FilterModel:
 def channel_config(channels: tuple[Channel, ...] | list[Channel], H: np.ndarray) -> np.ndarray:
     """The m x N_CFG array the compiled kernels read for channels with measurement rows H
     (see rovlab.estimation.fusion)."""
-    # imported here: fusion imports numba, which ``rovlab design`` does not need
-    from rovlab.estimation.fusion import (
+    from rovlab.estimation.layout import (
         CFG_ANGLE,
         CFG_GATE,
         CFG_LOSE_AFTER,
@@ -364,7 +363,7 @@ def make_channels(vehicle: Vehicle, config: DesignConfig, state_of: dict[str, in
     measurable quantity is ``state_of`` (every problem collected, none raised). Shared by the
     depth-and-heading filter and the 4-DOF EKF: the same sensor-management settings, lever arms
     and variances."""
-    from rovlab.estimation.fusion import STUCK_FALSE_ALARM  # here: fusion imports numba (design needs none)
+    from rovlab.estimation.layout import STUCK_FALSE_ALARM
 
     file = config.file or config.name
     channels: list[Channel] = []

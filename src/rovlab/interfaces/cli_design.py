@@ -234,7 +234,8 @@ def _filter(args: argparse.Namespace, vehicle, config, model, log: str) -> int:
 
 def _filter_chunks(args: argparse.Namespace, vehicle, config, model, stream, chunks, columns: list[str],
                    source: dict[str, str]) -> int:
-    from rovlab.estimation.fusion import (
+    from rovlab.estimation.kalman import DepthHeadingFilter, IntervalError, StreamingFilter
+    from rovlab.estimation.layout import (
         EVENT_NONFINITE,
         EVENT_REJECTED,
         EVENT_USED,
@@ -243,7 +244,6 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, model, stream, chu
         STATUS_NAMES,
         status_label,
     )
-    from rovlab.estimation.kalman import DepthHeadingFilter, IntervalError, StreamingFilter
     from rovlab.interfaces.cli import UserError
     from rovlab.io.logs import ChunkWriter
     from rovlab.io.tables import write_sidecar
