@@ -215,12 +215,17 @@ def compile_in_background(key: str, scenario: str, design: str | None = None) ->
         log = folder / f"{key}.log"
         env = {k: v for k, v in os.environ.items() if k != "NUMBA_DISABLE_JIT"}
         env["ROVLAB_JIT"] = "compile"
-        with open(log, "wb") as out:
-            argv = [sys.executable, "-m", "rovlab.sim.warm", scenario, "--key", key, "--lock", str(lock)]
-            proc = subprocess.Popen(argv + (["--config", design] if design else []), stdin=subprocess.DEVNULL, stdout=out,
-                                    stderr=subprocess.STDOUT, env=env, start_new_session=True)
-        os.write(fd, str(proc.pid).encode())
-        os.close(fd)
+        argv = [sys.executable, "-m", "rovlab.sim.warm", scenario, "--key", key, "--lock", str(lock)]
+        try:
+            with open(log, "wb") as out:
+                proc = subprocess.Popen(argv + (["--config", design] if design else []), stdin=subprocess.DEVNULL,
+                                        stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+            os.write(fd, str(proc.pid).encode())
+        except OSError:
+            lock.unlink(missing_ok=True)  # nothing started: the next run may try again
+            raise
+        finally:
+            os.close(fd)
         return str(log)
     except OSError:
         return None
