@@ -99,20 +99,27 @@ def command_message(t: float, tau: Mapping[str, float], pwm_us: Mapping[str, flo
     return out
 
 
-def _group(columns: Mapping[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:
-    return {name[len(prefix):]: np.asarray(col) for name, col in columns.items() if name.startswith(prefix)}
+_PREFIXES = ("true_", "est_", "var_", "status_", "meas_", "ref_", "tau_", "pwm_", "ctrl_")
 
 
-def row_messages(columns: Mapping[str, np.ndarray], k: int) -> Iterator[tuple[str, float, dict[str, Any]]]:
-    """The messages of row k of a time-series log."""
-    t = float(columns["time_s"][k])
-    groups = {p: _group(columns, p) for p in ("true_", "est_", "var_", "status_", "meas_", "ref_", "tau_", "pwm_",
-                                              "ctrl_")}
+def _groups(columns: Mapping[str, Any]) -> dict[str, dict[str, list[float]]]:
+    """The columns by message group (prefix -> {name without prefix: values as Python floats})."""
+    out: dict[str, dict[str, list[float]]] = {p: {} for p in _PREFIXES}
+    for name, col in columns.items():
+        for p in _PREFIXES:
+            if name.startswith(p):
+                out[p][name[len(p):]] = np.asarray(col, dtype=float).tolist()
+                break
+    return out
+
+
+def _messages(groups: Mapping[str, Mapping[str, list[float]]], t: float,
+              k: int) -> Iterator[tuple[str, float, dict[str, Any]]]:
     if groups["true_"]:
         yield "/rovlab/truth", t, truth_message(t, {n: c[k] for n, c in groups["true_"].items()})
     if groups["est_"]:
         status = {n: SENSOR_STATUS.get(int(c[k]), "unknown") for n, c in groups["status_"].items()
-                  if not math.isnan(float(c[k]))}
+                  if not math.isnan(c[k])}
         yield "/rovlab/estimate", t, estimate_message(
             t, {n: c[k] for n, c in groups["est_"].items()}, {n: c[k] for n, c in groups["var_"].items()}, status)
     if groups["meas_"]:
@@ -125,6 +132,14 @@ def row_messages(columns: Mapping[str, np.ndarray], k: int) -> Iterator[tuple[st
                                                     {n: c[k] for n, c in groups["ctrl_"].items()})
 
 
+def row_messages(columns: Mapping[str, np.ndarray], k: int) -> Iterator[tuple[str, float, dict[str, Any]]]:
+    """The messages of row k of a time-series log."""
+    yield from _messages(_groups({n: np.asarray(c)[k:k + 1] for n, c in columns.items()}),
+                         float(columns["time_s"][k]), 0)
+
+
 def rows_to_messages(columns: Mapping[str, np.ndarray]) -> Iterator[tuple[str, float, dict[str, Any]]]:
-    for k in range(len(columns["time_s"])):
-        yield from row_messages(columns, k)
+    """The messages of every row, in row order (the columns are grouped once)."""
+    groups = _groups(columns)
+    for k, t in enumerate(np.asarray(columns["time_s"], dtype=float).tolist()):
+        yield from _messages(groups, t, k)

@@ -25,21 +25,16 @@ from rovlab.io.messages import TOPICS, rows_to_messages
 def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata: Mapping[str, str] | None = None,
                start_time_s: float | None = None) -> Path:
     """Write the rows to MCAP (requires `mcap`): every column as JSON messages on the topics of
-    rovlab.io.messages (JSON Schema declared: Foxglove plots any field), and, where the
-    mcap-ros2-support package is present, the poses and velocities as ROS 2 nav_msgs/Odometry
+    rovlab.io.messages (JSON Schema declared: Foxglove plots any field), and the poses and
+    velocities as ROS 2 nav_msgs/Odometry
     (/rovlab/odometry/truth, /rovlab/odometry/estimate with the filter's variances) and the
     wrench as geometry_msgs/WrenchStamped (/rovlab/wrench), which Foxglove's 3D panel and ROS 2
-    tools open without configuration. Log times are wall-clock: ``start_time_s`` (UNIX seconds of
-    the run's start; default now) + time_s."""
+    tools open without configuration (CDR encoded by rovlab.io.ros2msg). Log times are
+    wall-clock: ``start_time_s`` (UNIX seconds of the run's start; default now) + time_s."""
     try:
         from mcap.writer import CompressionType, Writer
     except ImportError as exc:  # pragma: no cover - optional extra
         raise RuntimeError("writing MCAP needs the 'mcap' package: pip install 'rovlab[log]'") from exc
-    serialize_dynamic: Any = None
-    try:  # the CDR encoder of mcap-ros2-support (what its own Writer uses)
-        from mcap_ros2._dynamic import serialize_dynamic
-    except ImportError:  # pragma: no cover - optional extra
-        pass
     t0_ns = int(round((time.time() if start_time_s is None else float(start_time_s)) * 1e9))
     path = Path(path)
     with atomic_open(path, "wb") as fh:
@@ -50,13 +45,9 @@ def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata:
             sid = writer.register_schema(name="rovlab." + topic.rsplit("/", 1)[-1], encoding="jsonschema",
                                          data=json.dumps(schema).encode())
             channel_ids[topic] = writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
-        encoders = {}
-        if serialize_dynamic is not None:
-            for topic, datatype in ROS2_TOPICS.items():
-                text = ros2msg.DEFINITIONS[datatype]
-                sid = writer.register_schema(name=datatype, encoding="ros2msg", data=text.encode())
-                channel_ids[topic] = writer.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
-                encoders[topic] = serialize_dynamic(datatype, text)[datatype]
+        for topic, datatype in ROS2_TOPICS.items():
+            sid = writer.register_schema(name=datatype, encoding="ros2msg", data=ros2msg.DEFINITIONS[datatype].encode())
+            channel_ids[topic] = writer.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
         meta = {"start_time_unix_s": f"{t0_ns / 1e9:.9f}", "world_frame": ros2msg.WORLD_FRAME,
                 "body_frame": ros2msg.BODY_FRAME, **{k: str(v) for k, v in (metadata or {}).items()}}
         writer.add_metadata("rovlab", meta)
@@ -66,11 +57,8 @@ def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata:
             writer.add_message(channel_ids[topic], log_time=stamp, data=json.dumps(msg).encode(),
                                publish_time=stamp, sequence=seq)
             seq += 1
-            if not encoders:
-                continue
-            for ros_topic, ros_msg in _ros2_messages(topic, stamp, msg):
-                writer.add_message(channel_ids[ros_topic], log_time=stamp, data=encoders[ros_topic](ros_msg),
-                                   publish_time=stamp, sequence=seq)
+            for ros_topic, data in _ros2_messages(topic, stamp, msg):
+                writer.add_message(channel_ids[ros_topic], log_time=stamp, data=data, publish_time=stamp, sequence=seq)
                 seq += 1
         writer.finish()
     return path
@@ -84,13 +72,13 @@ ROS2_TOPICS = {
 
 
 def _ros2_messages(topic: str, stamp: int, msg: Mapping[str, Any]):
-    """The ROS 2 messages that go with one rovlab message."""
+    """The ROS 2 messages (CDR bytes) that go with one rovlab message."""
     if topic == "/rovlab/truth":
-        yield "/rovlab/odometry/truth", ros2msg.odometry(stamp, msg["state"])
+        yield "/rovlab/odometry/truth", ros2msg.odometry_cdr(stamp, msg["state"])
     elif topic == "/rovlab/estimate":
-        yield "/rovlab/odometry/estimate", ros2msg.odometry(stamp, msg["state"], msg.get("variance"))
+        yield "/rovlab/odometry/estimate", ros2msg.odometry_cdr(stamp, msg["state"], msg.get("variance"))
     elif topic == "/rovlab/command" and msg.get("tau"):
-        yield "/rovlab/wrench", ros2msg.wrench_stamped(stamp, msg["tau"])
+        yield "/rovlab/wrench", ros2msg.wrench_stamped_cdr(stamp, msg["tau"])
 
 
 class McapStream:

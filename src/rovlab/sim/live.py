@@ -22,7 +22,7 @@ import numpy as np
 
 from rovlab.core.components import plant_draws, restore, state_of
 from rovlab.estimation.fusion import CH_MODE, MODE_AUTO, MODE_OFF, MODE_ON, new_channel_state
-from rovlab.io.messages import row_messages
+from rovlab.io.messages import rows_to_messages
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
 from rovlab.sim.loop import Drive, draw
@@ -184,9 +184,7 @@ class LiveSimulation:
         plant_n, bias_n, sensor_n = normals
         logs = self.sim.advance(Drive(plant_n, bias_n, sensor_n, dropout, refs, heave, pset))
         cols = columns(prep, logs, times, refs)
-        out: list[tuple[str, float, dict[str, Any]]] = []
-        for i in range(n):
-            out.extend(row_messages(cols, i))
+        out: list[tuple[str, float, dict[str, Any]]] = list(rows_to_messages(cols))
         self.last_columns = cols
         return out
 
