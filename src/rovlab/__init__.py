@@ -38,6 +38,55 @@ def cache_home() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "rovlab"
 
 
+CACHE_KEEP_DAYS = 14  # a cache folder of other sources unused this long is removed ...
+CACHE_KEEP_RECENT = 4  # ... and beyond the most recently used few
+
+
+def prune_caches(*, keep: Path | None = None, now: float | None = None) -> list[Path]:
+    """Remove what older sources of rovlab left in its cache folder: compiled-kernel folders
+    (numba/<digest>) and stored designs (design/*.pickle) not used for CACHE_KEEP_DAYS days, and
+    compiled-kernel folders beyond the CACHE_KEEP_RECENT most recently used (each ~5-30 MB; every
+    upgrade or edit of rovlab starts a new one). ``keep`` (the folder in use) is never removed.
+    Runs when a new source version first runs; errors (a file another process holds, a
+    read-only folder) are skipped. Returns what was removed."""
+    import shutil
+    import time
+
+    now = time.time() if now is None else now
+    cutoff = now - CACHE_KEEP_DAYS * 86400.0
+    removed: list[Path] = []
+    home = cache_home()
+
+    def last_use(path: Path) -> float:
+        try:
+            return path.stat().st_mtime
+        except OSError:
+            return now
+
+    try:
+        folders = sorted((f for f in (home / "numba").iterdir() if f.is_dir() and f != keep), key=last_use,
+                         reverse=True)
+    except OSError:
+        folders = []
+    for i, f in enumerate(folders):
+        if last_use(f) < cutoff or i >= CACHE_KEEP_RECENT - (keep is not None):
+            shutil.rmtree(f, ignore_errors=True)
+            if not f.exists():
+                removed.append(f)
+    try:
+        designs = [f for f in (home / "design").iterdir() if f.suffix == ".pickle"]
+    except OSError:
+        designs = []
+    for f in designs:
+        if last_use(f) < cutoff:
+            try:
+                f.unlink()
+                removed.append(f)
+            except OSError:
+                pass
+    return removed
+
+
 def _numba_cache_dir() -> None:
     """Point numba's on-disk cache at a folder keyed by this package's sources.
 
@@ -55,9 +104,14 @@ def _numba_cache_dir() -> None:
         return
     try:
         folder = cache_home() / "numba" / digest[:16]
+        new = not folder.is_dir()
         folder.mkdir(parents=True, exist_ok=True)
+        if not new:
+            os.utime(folder)  # its last use, for prune_caches
     except OSError:
         return  # read-only home and the like: numba falls back to its own default
+    if new:  # first use of these sources (an upgrade, an edit): drop the caches nothing uses any more
+        prune_caches(keep=folder)
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
     # numba imported before rovlab has already read its environment: make it read it again
     # (otherwise the kernels decorated next would cache into the installed package folder).

@@ -102,3 +102,51 @@ def test_python_dash_m_reports_user_errors_without_traceback(tmp_path):
     res = subprocess.run([sys.executable, "-m", "rovlab.interfaces.cli", "thruster", "--thruster", "T9", "--pwm", "1500"],
                          capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert res.returncode == 2 and "Traceback" not in res.stderr and "T9" in res.stderr, res.stderr
+
+
+def _aged(path, days_ago: float, now: float) -> None:
+    os.utime(path, (now - days_ago * 86400, now - days_ago * 86400))
+
+
+def test_prune_caches_keeps_what_is_in_use_and_recent(tmp_path, monkeypatch):
+    import time
+
+    import rovlab
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    now = time.time()
+    numba_dir, design_dir = tmp_path / "rovlab" / "numba", tmp_path / "rovlab" / "design"
+    design_dir.mkdir(parents=True)
+    ages = {"current": 0.0, "yesterday": 1.0, "week": 7.0, "ten": 10.0, "twelve": 12.0, "old": 40.0}
+    for name, age in ages.items():
+        (numba_dir / name).mkdir(parents=True)
+        (numba_dir / name / "k.nbi").write_bytes(b"x")
+        _aged(numba_dir / name, age, now)
+    for name, age in {"fresh.pickle": 2.0, "stale.pickle": 30.0}.items():
+        (design_dir / name).write_bytes(b"x")
+        _aged(design_dir / name, age, now)
+    (design_dir / "notes.txt").write_text("not ours")
+    _aged(design_dir / "notes.txt", 90.0, now)
+    removed = rovlab.prune_caches(keep=numba_dir / "current", now=now)
+    left = sorted(p.name for p in numba_dir.iterdir())
+    # the one in use, then the most recently used up to CACHE_KEEP_RECENT in all; 'old' is past the age limit
+    assert left == sorted(["current", "yesterday", "week", "ten"]), left
+    assert sorted(p.name for p in design_dir.iterdir()) == ["fresh.pickle", "notes.txt"]
+    assert {p.name for p in removed} == {"twelve", "old", "stale.pickle"}
+    # without a cache folder at all nothing happens
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "none"))
+    assert rovlab.prune_caches() == []
+
+
+def test_a_new_source_version_prunes_on_first_import(tmp_path):
+    import time
+
+    now = time.time()
+    numba_dir = tmp_path / "cache" / "rovlab" / "numba"
+    for name, age in {"0000000000000000": 30.0, "1111111111111111": 1.0}.items():
+        (numba_dir / name).mkdir(parents=True)
+        _aged(numba_dir / name, age, now)
+    res = _python("import os, rovlab\nprint(os.environ['NUMBA_CACHE_DIR'])", tmp_path)
+    assert res.returncode == 0, res.stderr
+    mine = res.stdout.strip()
+    assert sorted(p.name for p in numba_dir.iterdir()) == sorted(["1111111111111111", os.path.basename(mine)])

@@ -343,6 +343,10 @@ def cached_filter_model(vehicle: Vehicle, config: DesignConfig) -> FilterModel:
         with open(path, "rb") as f:
             stored = pickle.load(f)
         if isinstance(stored, tuple) and len(stored) == 2 and stored[0] == key and isinstance(stored[1], FilterModel):
+            try:
+                os.utime(path)  # its last use (rovlab.prune_caches removes designs unused for weeks)
+            except OSError:
+                pass
             return stored[1]
     except Exception:  # noqa: BLE001 -- no file, or a damaged one: design afresh
         pass
