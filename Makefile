@@ -61,4 +61,4 @@ clean: clean-cache
 	rm -rf $(VENV) $(VENV_ROS2) $(VENV_ROS1) out build src/*.egg-info
 
 clean-cache:
-	rm -rf $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/numba $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/design
+	rm -rf $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/numba $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/design $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/aot

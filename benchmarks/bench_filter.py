@@ -26,6 +26,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
+import subprocess  # noqa: E402
 import time  # noqa: E402
 from dataclasses import replace  # noqa: E402
 
@@ -194,16 +195,16 @@ res.to_csv(out, index=False)
 LONG = 360_000
 
 
-def _child(argv, cwd):
-    """(seconds, peak RSS MiB) of one whole process."""
+def _child(argv, cwd, **env):
+    """(seconds, peak RSS MiB) of one whole process (``env``: extra environment variables)."""
     import os
-    import subprocess
 
     # measured by /usr/bin/time where there is one: a child's own ru_maxrss also counts the memory
     # of this (large) process it was forked from, before its exec
     timer = ["/usr/bin/time", "-f", "%M"] if os.path.exists("/usr/bin/time") else []
     t0 = time.perf_counter()
-    proc = subprocess.Popen(timer + argv, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(timer + argv, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            env={**os.environ, **env})
     _, status, usage = os.wait4(proc.pid, 0)
     dt = time.perf_counter() - t0
     err = proc.stderr.read().decode(errors="replace")
@@ -249,7 +250,10 @@ def whole_process() -> None:
         peer = [sys.executable, str(work_path / "peer.py"), str(log), str(work_path / "peer.csv"),
                 str(work_path / "model.npz")]
         _child(ours, work)  # compiles (or loads) the numba cache and stores the design: the rows below are warm
+        # the kernels built ahead of time, as they are from a version's second run on (rovlab._aot)
+        subprocess.run([sys.executable, "-m", "rovlab._aot", "build"], check=True, stdout=subprocess.DEVNULL)
         runs = [_child(ours, work) for _ in range(5)]
+        jit_runs = [_child(ours, work, ROVLAB_AOT="0") for _ in range(3)]
         peers = [_child(peer, work) for _ in range(2)]
         long_runs = [_child(ours[:4] + [str(log_long), "--out", str(work_path / "est6.csv")], work)
                      for _ in range(2)]
@@ -263,13 +267,15 @@ def whole_process() -> None:
         ts = sorted(x for x, _ in rs)
         return statistics.median(ts), ts[0], ts[-1], max(mm for _, mm in rs)
 
-    o, p, lg = med(runs), med(peers), med(long_runs)
+    o, p, lg, oj = med(runs), med(peers), med(long_runs), med(jit_runs)
     load = os.getloadavg() if hasattr(os, "getloadavg") else (math.nan,) * 3
-    print(f"\nwhole processes, {LONG} rows (warm numba and design caches), median [range], peak RSS; "
+    print(f"\nwhole processes, {LONG} rows (warm numba, design and ahead-of-time caches), median [range], peak RSS; "
           f"load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} cores:")
     print(f"  pandas + filterpy script     {p[0]:7.2f} s [{p[1]:.2f}-{p[2]:.2f}]  {p[3]:6.0f} MiB")
     print(f"  rovlab filter                {o[0]:7.2f} s [{o[1]:.2f}-{o[2]:.2f}]  {o[3]:6.0f} MiB   "
           f"speed-up {p[0] / o[0]:.1f}x (range {p[1] / o[2]:.1f}-{p[2] / o[1]:.1f}x)")
+    print(f"  rovlab filter, JIT kernels   {oj[0]:7.2f} s [{oj[1]:.2f}-{oj[2]:.2f}]  {oj[3]:6.0f} MiB   "
+          f"speed-up {p[0] / oj[0]:.1f}x (a version's first run, or ROVLAB_AOT=0)")
     print(f"  rovlab filter, {6 * LONG} rows {lg[0]:7.2f} s [{lg[1]:.2f}-{lg[2]:.2f}]  {lg[3]:6.0f} MiB")
     print(f"  max |z_rovlab - z_peer| = {z_diff:.2e} m (rovlab gates a few samples the peer takes)")
     print("goal (issue 16): rovlab filter >= 20x the pandas + filterpy script, <= 200 MiB")

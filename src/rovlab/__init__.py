@@ -43,12 +43,13 @@ CACHE_KEEP_RECENT = 4  # ... and beyond the most recently used few
 
 
 def prune_caches(*, keep: Path | None = None, now: float | None = None) -> list[Path]:
-    """Remove what older sources of rovlab left in its cache folder: compiled-kernel folders
-    (numba/<digest>) and stored designs (design/*.pickle) not used for CACHE_KEEP_DAYS days, and
-    compiled-kernel folders beyond the CACHE_KEEP_RECENT most recently used (each ~5-30 MB; every
-    upgrade or edit of rovlab starts a new one). ``keep`` (the folder in use) is never removed.
-    Runs when a new source version first runs; errors (a file another process holds, a
-    read-only folder) are skipped. Returns what was removed."""
+    """Remove what older sources of rovlab left in its cache folder: folders of compiled kernels
+    (numba/<sources>, aot/<sources>-<cpu>) and stored designs (design/*.pickle) not used for
+    CACHE_KEEP_DAYS days, and kernel folders beyond the CACHE_KEEP_RECENT most recently used of
+    each kind (each ~5-30 MB; every upgrade or edit of rovlab starts new ones). ``keep`` (the
+    numba folder in use) and the folders of the same sources are never removed. Runs when new
+    sources first run; errors (a file another process holds, a read-only folder) are skipped.
+    Returns what was removed."""
     import shutil
     import time
 
@@ -56,6 +57,7 @@ def prune_caches(*, keep: Path | None = None, now: float | None = None) -> list[
     cutoff = now - CACHE_KEEP_DAYS * 86400.0
     removed: list[Path] = []
     home = cache_home()
+    mine = keep.name[:16] if keep is not None else None
 
     def last_use(path: Path) -> float:
         try:
@@ -63,13 +65,20 @@ def prune_caches(*, keep: Path | None = None, now: float | None = None) -> list[
         except OSError:
             return now
 
-    try:
-        folders = sorted((f for f in (home / "numba").iterdir() if f.is_dir() and f != keep), key=last_use,
-                         reverse=True)
-    except OSError:
-        folders = []
-    for i, f in enumerate(folders):
-        if last_use(f) < cutoff or i >= CACHE_KEEP_RECENT - (keep is not None):
+    for kind in ("numba", "aot"):
+        try:
+            folders = sorted((f for f in (home / kind).iterdir() if f.is_dir() and not f.name.startswith(".")),
+                             key=last_use, reverse=True)
+        except OSError:
+            continue
+        kept = 0
+        for f in folders:
+            if mine is not None and f.name.startswith(mine):
+                kept += 1
+                continue
+            if last_use(f) >= cutoff and kept < CACHE_KEEP_RECENT:
+                kept += 1
+                continue
             shutil.rmtree(f, ignore_errors=True)
             if not f.exists():
                 removed.append(f)

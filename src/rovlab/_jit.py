@@ -183,6 +183,13 @@ def compile_in_background(key: str, scenario: str, design: str | None = None) ->
     """Start a detached, low-priority process that compiles the loop ``scenario`` needs into the
     cache (rovlab.sim.warm) unless one is already running for ``key``; returns the log file of
     the compile under way, or None if there is no cache to fill."""
+    return start_detached(key, ["rovlab.sim.warm", scenario, "--key", key] + (["--config", design] if design else []))
+
+
+def start_detached(key: str, module_argv: list[str]) -> str | None:
+    """Run ``python -m <module_argv> --lock LOCK`` detached (its own session, output to
+    ``<key>.log`` next to the markers) unless a process started for ``key`` is still running;
+    the module removes LOCK when it ends. Returns the log file, or None without a cache folder."""
     import os
     import subprocess
     import sys
@@ -205,7 +212,7 @@ def compile_in_background(key: str, scenario: str, design: str | None = None) ->
                         return str(folder / f"{key}.log")  # its process is being started
                 else:
                     os.kill(int(text), 0)
-                    return str(folder / f"{key}.log")  # a compile for this loop is under way
+                    return str(folder / f"{key}.log")  # a process for this key is under way
             except (ProcessLookupError, ValueError):
                 pass  # a stale lock: its process is gone
             except PermissionError:
@@ -215,11 +222,11 @@ def compile_in_background(key: str, scenario: str, design: str | None = None) ->
         log = folder / f"{key}.log"
         env = {k: v for k, v in os.environ.items() if k != "NUMBA_DISABLE_JIT"}
         env["ROVLAB_JIT"] = "compile"
-        argv = [sys.executable, "-m", "rovlab.sim.warm", scenario, "--key", key, "--lock", str(lock)]
+        argv = [sys.executable, "-m", *module_argv, "--lock", str(lock)]
         try:
             with open(log, "wb") as out:
-                proc = subprocess.Popen(argv + (["--config", design] if design else []), stdin=subprocess.DEVNULL,
-                                        stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+                proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
+                                        env=env, start_new_session=True)
             os.write(fd, str(proc.pid).encode())
         except OSError:
             lock.unlink(missing_ok=True)  # nothing started: the next run may try again

@@ -757,7 +757,10 @@ class DepthHeadingFilter:
         innov = np.empty((N, self.m))
         S = np.empty((N, self.m))
         flags = np.empty(N, dtype=np.int8)
-        kf_run(self.packed, x, P, ch, t, u, y, pres, npred, X, V, status, reason, event, innov, S, flags)
+        from rovlab import _aot  # built ahead of time when it is (no JIT start-up); else numba's
+
+        _aot.call("kf_run", kf_run, self.packed, x, P, ch, t, u, y, pres, npred, X, V, status, reason, event, innov,
+                  S, flags)
         final = Belief.make(x, P, ch, float(t[-1]) if N else b.t)
         return FilterRun(t=t, x=X, variance=V, status=status, reason=reason, event=event, innovation=innov,
                          innovation_variance=S, flags=flags, belief=final, states=self.model.states,

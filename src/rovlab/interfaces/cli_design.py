@@ -166,8 +166,22 @@ def _cmd_filter(args: argparse.Namespace) -> int:
         raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
     vehicle, config, model = _load(args, cached=True)
     _check_initial(config, model)
+    _build_kernels_ahead()
     with tempfile.TemporaryDirectory(prefix="rovlab-filter-") as tmp:
         return _filter(args, vehicle, config, model, _as_csv(args.log, vehicle, model, Path(tmp)))
+
+
+def _build_kernels_ahead() -> None:
+    """The first run of this version: start building the filter's kernels ahead of time in the
+    background (rovlab._aot), so that later runs skip numba's compiler set-up (~0.5 s)."""
+    from rovlab import _aot
+
+    if not _aot.enabled() or _aot.built():
+        return
+    log = _aot.build_in_background()
+    if log:
+        print(f"rovlab filter: building its kernels ahead of time in the background, once per version "
+              f"(~20-60 s; log: {log}); until then they run through numba's JIT", file=sys.stderr)
 
 
 def _as_csv(log: str, vehicle, model, folder: Path) -> str:

@@ -329,14 +329,18 @@ def csv_rows(columns: Sequence[np.ndarray | tuple[np.ndarray, Sequence[str]]],
         codes2[:, j] = arr
     all_labels = [s for group in texts for s in group]
     lab = np.frombuffer(b"".join(all_labels), dtype=np.uint8) if all_labels else np.zeros(0, dtype=np.uint8)
+    lab.flags.writeable = False  # one type either way (read-only)
     lab_off = np.zeros(len(all_labels) + 1, dtype=np.int64)
     np.cumsum([len(s) for s in all_labels], out=lab_off[1:])
     out = np.empty(n * width, dtype=np.uint8)
     left = np.empty((64, 2), dtype=np.int64)  # values left to Python are rare
-    size, n_left = _rows(F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
+    from rovlab import _aot  # built ahead of time when it is (no JIT start-up); else numba's
+
+    size, n_left = _aot.call("csv_rows", _rows, F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
     if n_left > left.shape[0]:
         left = np.empty((n_left, 2), dtype=np.int64)
-        size, n_left = _rows(F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
+        size, n_left = _aot.call("csv_rows", _rows, F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out,
+                                 left)
     if not n_left:
         return out.data[:size]  # no copy: pages past size were never touched
     from rovlab.io.logs import round_significant

@@ -1,0 +1,238 @@
+"""Kernels compiled ahead of time, for commands whose work is one kernel (``rovlab filter``).
+
+A process that calls a numba kernel pays once for numba's compiler set-up (its CPU target's
+registries, which import scipy.linalg for BLAS): ~0.5-0.7 s on the 2-core machine, loading from
+the disk cache included, on top of numba's import -- most of what ``rovlab filter`` spends
+before reading its log. The same kernels compiled ahead of time (numba.pycc) into an extension
+module load in under a millisecond and never start the compiler.
+
+The kernels of :data:`KERNELS` are compiled from the same Python functions as the JIT ones and
+for this machine's CPU, each into its own extension module (numba.pycc fails to type one of them
+when both share a module). They are built once per version of rovlab's sources and per CPU, in
+the background the first time ``rovlab filter`` runs (``python -m rovlab._aot build``, ~20-60 s
+at low priority), into ``<cache>/aot/<sources>-<cpu>/`` (pruned with the other caches,
+rovlab.prune_caches), and used from then on. Until they exist, or with ``ROVLAB_AOT=0``, the JIT
+kernels run; both write the same bytes (tests/estimation/test_aot.py). numba.pycc is pending
+deprecation in numba (no replacement yet); if it goes, the build fails, its log says why, and
+the JIT kernels keep running.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+MODULE = "rovlab_aot"  # + "_" + the kernel's name
+BUILD_KEY = "aot-kernels"  # lock and log of the background build (rovlab._jit.start_detached)
+
+# exported name -> (module, function, argument arrays as "<dtype>:<ndim>", result): the kernels
+# and the C-contiguous arrays they are built for (scalars are not needed by these kernels)
+KERNELS = {
+    # kf_run(model, x, P, ch, t, u, y, present, n_predict, X, V, status, reason, event, innov, S, flags)
+    "kf_run": ("rovlab.estimation.kalman", "kf_run",
+               ("f8:1", "f8:1", "f8:2", "f8:2", "f8:1", "f8:2", "f8:2", "b1:2", "i8:1", "f8:2", "f8:2", "i1:2",
+                "i1:2", "i1:2", "f8:2", "f8:2", "i1:1"), "void"),
+    # _rows(F, Fbits, sig, codes, kinds, index, lab, lab_off, out, left) -> (bytes written, values left)
+    "csv_rows": ("rovlab.io.csvtext", "_rows",
+                 ("f8:2", "u8:2", "i8:1", "i8:2", "i8:1", "i8:1", "u1:1", "i8:1", "u1:1", "i8:2"), "i8,i8"),
+}
+_DTYPES = {"f8": "float64", "i8": "int64", "i1": "int8", "u1": "uint8", "u8": "uint64", "b1": "bool"}
+
+_loaded: dict[str, Any] = {}  # this process's loaded modules, by kernel (once per process, like sys.modules)
+
+
+def _signature(name: str) -> Any:
+    """The numba signature of a kernel of KERNELS (at build time)."""
+    from numba.core import types
+    from numba.np.numpy_support import from_dtype
+
+    def array(spec: str) -> Any:
+        code, ndim = spec.split(":")
+        return types.Array(from_dtype(np.dtype(_DTYPES[code])), int(ndim), "C")
+
+    _, _, args, result = KERNELS[name]
+    ret = types.void if result == "void" else types.Tuple([from_dtype(np.dtype(_DTYPES[c])) for c in result.split(",")])
+    return ret(*(array(a) for a in args))
+
+
+def _fits(name: str, args: tuple[Any, ...]) -> bool:
+    """Whether ``args`` are exactly the arrays the kernel was built for (the compiled wrapper
+    trusts them: another dtype, rank or a strided view would be read wrongly)."""
+    specs = KERNELS[name][2]
+    if len(args) != len(specs):
+        return False
+    for a, spec in zip(args, specs):
+        code, ndim = spec.split(":")
+        if not (isinstance(a, np.ndarray) and a.ndim == int(ndim) and a.dtype == _DTYPES[code]
+                and a.flags.c_contiguous):
+            return False
+    return True
+
+
+def call(name: str, jit: Callable[..., Any], *args: Any) -> Any:
+    """``name`` ahead-of-time compiled when it is built and the arguments fit it, else ``jit``
+    (the same kernel through numba's JIT). The results are the same either way."""
+    fn = kernel(name)
+    if fn is not None and _fits(name, args):
+        return fn(*args)
+    return jit(*args)
+
+
+def _cpu() -> str:
+    """A short key of this machine's CPU (architecture and instruction-set flags): a module
+    built for one CPU must not run on another (a home folder shared between machines)."""
+    import hashlib
+    import platform
+
+    text = platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith(("flags", "Features", "isa")):
+                    text += line
+                    break
+    except OSError:
+        text += platform.processor()
+    return hashlib.sha1(text.encode()).hexdigest()[:8]
+
+
+def folder() -> Path | None:
+    """Where this version's module is (or goes); None if rovlab's sources cannot be read."""
+    from rovlab import cache_home, source_digest
+
+    digest = source_digest()
+    return None if digest is None else cache_home() / "aot" / f"{digest[:16]}-{_cpu()}"
+
+
+def _module_file(where: Path, name: str) -> Path | None:
+    import importlib.machinery
+
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        path = where / f"{MODULE}_{name}{suffix}"
+        if path.is_file():
+            return path
+    return None
+
+
+def built() -> bool:
+    """Whether every kernel of this version is built for this CPU."""
+    where = folder()
+    return where is not None and all(_module_file(where, name) is not None for name in KERNELS)
+
+
+def enabled() -> bool:
+    """ROVLAB_AOT: 1/auto (default: use the module when it is built) or 0 (never)."""
+    return os.environ.get("ROVLAB_AOT", "1").strip().lower() not in ("0", "no", "off", "false")
+
+
+def kernel(name: str) -> Callable[..., Any] | None:
+    """The ahead-of-time compiled ``name`` (a key of :data:`KERNELS`), loaded once per process;
+    None when it is not built yet, disabled (ROVLAB_AOT=0) or unloadable: then the JIT kernel runs."""
+    if name in _loaded:
+        return _loaded[name]
+    fn = None
+    where = folder() if enabled() else None
+    path = _module_file(where, name) if where is not None else None
+    if path is not None:
+        import importlib.util
+
+        try:
+            spec = importlib.util.spec_from_file_location(f"{MODULE}_{name}", path)
+            if spec is not None and spec.loader is not None:
+                mod = importlib.util.module_from_spec(spec)
+                spec.loader.exec_module(mod)
+                fn = getattr(mod, name, None)
+                os.utime(path.parent)  # its last use (rovlab.prune_caches)
+        except (ImportError, OSError):
+            fn = None  # damaged or foreign: the JIT kernel runs
+    _loaded[name] = fn
+    return fn
+
+
+def build(where: Path | None = None) -> Path:
+    """Compile :data:`KERNELS` into ``where`` (default :func:`folder`) for this CPU; returns the
+    folder. Needs a C compiler (numba.pycc builds with distutils' toolchain)."""
+    import importlib
+    import shutil
+    import tempfile
+    import warnings
+
+    where = where or folder()
+    if where is None:
+        raise RuntimeError("rovlab's sources cannot be read: no cache folder to build into")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # numba.pycc is pending deprecation (no replacement yet)
+        from llvmlite import binding
+        from numba.core.registry import cpu_target
+        from numba.pycc import CC
+
+    # the JIT refreshes the typing and target registries before compiling; numba.pycc does not,
+    # and without them some kernels fail to type (an inlined kernel's integer codes)
+    cpu_target.typing_context.refresh()
+    cpu_target.target_context.refresh()
+
+    where.mkdir(parents=True, exist_ok=True)
+    for name, (mod_name, func, _, _) in KERNELS.items():
+        with tempfile.TemporaryDirectory(prefix=".build-", dir=where) as tmp:
+            cc = CC(f"{MODULE}_{name}")
+            cc.output_dir = tmp
+            cc.target_cpu = binding.get_host_cpu_name()
+            cc.verbose = False
+            fn = getattr(importlib.import_module(mod_name), func)
+            cc.export(name, _signature(name))(getattr(fn, "py_func", fn))
+            cc.compile()
+            made = _module_file(Path(tmp), name)
+            if made is None:
+                raise RuntimeError(f"numba.pycc produced no {MODULE}_{name} extension in {tmp}")
+            partial = where / f".{made.name}.tmp"
+            shutil.move(str(made), str(partial))
+            os.replace(partial, where / made.name)
+    return where
+
+
+def build_in_background() -> str | None:
+    """Start ``python -m rovlab._aot build`` detached and at low priority unless it runs already;
+    returns its log file (None when there is nowhere to build)."""
+    from rovlab import _jit
+
+    if folder() is None:
+        return None
+    return _jit.start_detached(BUILD_KEY, ["rovlab._aot", "build"])
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    import time
+
+    p = argparse.ArgumentParser(prog="python -m rovlab._aot", description=__doc__.splitlines()[0])
+    p.add_argument("action", choices=["build", "where"], help="build the module, or print where it goes")
+    p.add_argument("--lock", default=None, help="lock file to remove when done (the background build)")
+    args = p.parse_args(argv)
+    try:
+        if args.action == "where":
+            print(folder())
+            return 0
+        if args.lock:
+            try:
+                os.nice(10)  # behind the user's foreground work
+            except OSError:
+                pass
+        t0 = time.perf_counter()
+        path = build()
+        print(f"built {path} in {time.perf_counter() - t0:.1f} s")
+        return 0
+    except Exception as exc:  # the log says why; the foreground runs keep using the JIT kernels
+        print(f"building the ahead-of-time kernels failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if args.lock:
+            Path(args.lock).unlink(missing_ok=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
