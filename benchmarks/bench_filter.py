@@ -249,7 +249,9 @@ def whole_process() -> None:
         ours = [sys.executable, "-m", "rovlab.interfaces.cli", "filter", str(log), "--out", str(work_path / "est.csv")]
         peer = [sys.executable, str(work_path / "peer.py"), str(log), str(work_path / "peer.csv"),
                 str(work_path / "model.npz")]
-        _child(ours, work)  # compiles (or loads) the numba cache and stores the design: the rows below are warm
+        # compiles (or loads) the numba cache and stores the design: the rows below are warm (no
+        # background build of the ahead-of-time kernels: it is built here, in the foreground)
+        _child(ours, work, ROVLAB_AOT="0")
         # the kernels built ahead of time, as they are from a version's second run on (rovlab._aot)
         subprocess.run([sys.executable, "-m", "rovlab._aot", "build"], check=True, stdout=subprocess.DEVNULL)
         runs = [_child(ours, work) for _ in range(5)]

@@ -46,8 +46,9 @@ def prune_caches(*, keep: Path | None = None, now: float | None = None) -> list[
     """Remove what older sources of rovlab left in its cache folder: folders of compiled kernels
     (numba/<sources>, aot/<sources>-<cpu>) and stored designs (design/*.pickle) not used for
     CACHE_KEEP_DAYS days, and kernel folders beyond the CACHE_KEEP_RECENT most recently used of
-    each kind (each ~5-30 MB; every upgrade or edit of rovlab starts new ones). ``keep`` (the
-    numba folder in use) and the folders of the same sources are never removed. Runs when new
+    each kind, the one in use included (each ~5-30 MB; every upgrade or edit of rovlab starts new
+    ones). Never removed: ``keep`` (the numba folder in use) and the folders of the same sources,
+    folders used in the last day, and folders whose background compile is still running. Runs when new
     sources first run; errors (a file another process holds, a read-only folder) are skipped.
     Returns what was removed."""
     import shutil
@@ -67,17 +68,15 @@ def prune_caches(*, keep: Path | None = None, now: float | None = None) -> list[
 
     for kind in ("numba", "aot"):
         try:
-            folders = sorted((f for f in (home / kind).iterdir() if f.is_dir() and not f.name.startswith(".")),
-                             key=last_use, reverse=True)
+            others = sorted((f for f in (home / kind).iterdir() if f.is_dir() and not f.name.startswith(".")
+                             and not (mine is not None and f.name.startswith(mine))), key=last_use, reverse=True)
         except OSError:
             continue
-        kept = 0
-        for f in folders:
-            if mine is not None and f.name.startswith(mine):
-                kept += 1
-                continue
-            if last_use(f) >= cutoff and kept < CACHE_KEEP_RECENT:
-                kept += 1
+        for i, f in enumerate(others):
+            used = last_use(f)
+            if used >= now - 86400.0 or _busy(f):
+                continue  # used today, or a compile for it is under way: another process may be on it
+            if used >= cutoff and i < CACHE_KEEP_RECENT - 1:
                 continue
             shutil.rmtree(f, ignore_errors=True)
             if not f.exists():
@@ -94,6 +93,20 @@ def prune_caches(*, keep: Path | None = None, now: float | None = None) -> list[
             except OSError:
                 pass
     return removed
+
+
+def _busy(folder: Path) -> bool:
+    """Whether a background compile (rovlab._jit.start_detached) holds a lock in this cache folder
+    and its process is alive."""
+    for lock in folder.glob("rovlab-ready/*.lock"):
+        try:
+            os.kill(int(lock.read_text().strip()), 0)
+            return True
+        except PermissionError:
+            return True
+        except (OSError, ValueError):
+            continue
+    return False
 
 
 def _numba_cache_dir() -> None:
@@ -115,10 +128,13 @@ def _numba_cache_dir() -> None:
         folder = cache_home() / "numba" / digest[:16]
         new = not folder.is_dir()
         folder.mkdir(parents=True, exist_ok=True)
-        if not new:
-            os.utime(folder)  # its last use, for prune_caches
     except OSError:
         return  # read-only home and the like: numba falls back to its own default
+    if not new:
+        try:
+            os.utime(folder)  # its last use, for prune_caches
+        except OSError:
+            pass
     if new:  # first use of these sources (an upgrade, an edit): drop the caches nothing uses any more
         prune_caches(keep=folder)
     os.environ["NUMBA_CACHE_DIR"] = str(folder)

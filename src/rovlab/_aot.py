@@ -29,17 +29,19 @@ import numpy as np
 
 MODULE = "rovlab_aot"  # + "_" + the kernel's name
 BUILD_KEY = "aot-kernels"  # lock and log of the background build (rovlab._jit.start_detached)
+FAILED = "build-failed.txt"  # in the version's folder: why its build failed (not retried)
 
-# exported name -> (module, function, argument arrays as "<dtype>:<ndim>", result): the kernels
-# and the C-contiguous arrays they are built for (scalars are not needed by these kernels)
+# exported name -> (module, function, argument arrays as "<dtype>:<ndim>[w]", result): the kernels
+# and the aligned C-contiguous arrays they are built for ("w": the kernel writes it; scalars are
+# not needed by these kernels)
 KERNELS = {
     # kf_run(model, x, P, ch, t, u, y, present, n_predict, X, V, status, reason, event, innov, S, flags)
     "kf_run": ("rovlab.estimation.kalman", "kf_run",
-               ("f8:1", "f8:1", "f8:2", "f8:2", "f8:1", "f8:2", "f8:2", "b1:2", "i8:1", "f8:2", "f8:2", "i1:2",
-                "i1:2", "i1:2", "f8:2", "f8:2", "i1:1"), "void"),
+               ("f8:1", "f8:1w", "f8:2w", "f8:2w", "f8:1", "f8:2", "f8:2", "b1:2", "i8:1", "f8:2w", "f8:2w", "i1:2w",
+                "i1:2w", "i1:2w", "f8:2w", "f8:2w", "i1:1w"), "void"),
     # _rows(F, Fbits, sig, codes, kinds, index, lab, lab_off, out, left) -> (bytes written, values left)
     "csv_rows": ("rovlab.io.csvtext", "_rows",
-                 ("f8:2", "u8:2", "i8:1", "i8:2", "i8:1", "i8:1", "u1:1", "i8:1", "u1:1", "i8:2"), "i8,i8"),
+                 ("f8:2", "u8:2", "i8:1", "i8:2", "i8:1", "i8:1", "u1:1", "i8:1", "u1:1w", "i8:2w"), "i8,i8"),
 }
 _DTYPES = {"f8": "float64", "i8": "int64", "i1": "int8", "u1": "uint8", "u8": "uint64", "b1": "bool"}
 
@@ -53,7 +55,7 @@ def _signature(name: str) -> Any:
 
     def array(spec: str) -> Any:
         code, ndim = spec.split(":")
-        return types.Array(from_dtype(np.dtype(_DTYPES[code])), int(ndim), "C")
+        return types.Array(from_dtype(np.dtype(_DTYPES[code])), int(ndim.rstrip("w")), "C")
 
     _, _, args, result = KERNELS[name]
     ret = types.void if result == "void" else types.Tuple([from_dtype(np.dtype(_DTYPES[c])) for c in result.split(",")])
@@ -62,14 +64,15 @@ def _signature(name: str) -> Any:
 
 def _fits(name: str, args: tuple[Any, ...]) -> bool:
     """Whether ``args`` are exactly the arrays the kernel was built for (the compiled wrapper
-    trusts them: another dtype, rank or a strided view would be read wrongly)."""
+    trusts them: another dtype or rank, a strided or misaligned view would be read wrongly, a
+    read-only output written)."""
     specs = KERNELS[name][2]
     if len(args) != len(specs):
         return False
     for a, spec in zip(args, specs):
         code, ndim = spec.split(":")
-        if not (isinstance(a, np.ndarray) and a.ndim == int(ndim) and a.dtype == _DTYPES[code]
-                and a.flags.c_contiguous):
+        if not (isinstance(a, np.ndarray) and a.ndim == int(ndim.rstrip("w")) and a.dtype == _DTYPES[code]
+                and a.flags.c_contiguous and a.flags.aligned and (a.flags.writeable or not ndim.endswith("w"))):
             return False
     return True
 
@@ -125,6 +128,18 @@ def built() -> bool:
     return where is not None and all(_module_file(where, name) is not None for name in KERNELS)
 
 
+def failed() -> str | None:
+    """Why building this version's kernels failed here (then it is not retried until rovlab's
+    sources change: each try costs a minute of CPU), or None."""
+    where = folder()
+    if where is None:
+        return None
+    try:
+        return (where / FAILED).read_text(encoding="utf-8").strip() or "unknown"
+    except OSError:
+        return None
+
+
 def enabled() -> bool:
     """ROVLAB_AOT: 1/auto (default: use the module when it is built) or 0 (never)."""
     return os.environ.get("ROVLAB_AOT", "1").strip().lower() not in ("0", "no", "off", "false")
@@ -147,9 +162,12 @@ def kernel(name: str) -> Callable[..., Any] | None:
                 mod = importlib.util.module_from_spec(spec)
                 spec.loader.exec_module(mod)
                 fn = getattr(mod, name, None)
-                os.utime(path.parent)  # its last use (rovlab.prune_caches)
         except (ImportError, OSError):
             fn = None  # damaged or foreign: the JIT kernel runs
+        try:
+            os.utime(path.parent)  # its last use (rovlab.prune_caches)
+        except OSError:
+            pass
     _loaded[name] = fn
     return fn
 
@@ -168,8 +186,22 @@ def build(where: Path | None = None) -> Path:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # numba.pycc is pending deprecation (no replacement yet)
         from llvmlite import binding
+        from numba.core import codegen
         from numba.core.registry import cpu_target
         from numba.pycc import CC
+        from numba.pycc import compiler as pycc_compiler
+
+    # Built as the JIT builds them (this process only builds): releasing the GIL as their nogil=True
+    # asks (pycc starts from default flags: the log's reader and writer threads would wait), and
+    # for this CPU's name *and* features (pycc derives features from the name alone, which a
+    # virtual machine that masks some would not run).
+    class _Flags(pycc_compiler.Flags):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self.release_gil = True  # type: ignore[assignment]
+
+    pycc_compiler.Flags = _Flags  # type: ignore[misc]
+    codegen.AOTCPUCodegen._customize_tm_features = lambda self: self._get_host_cpu_features()  # type: ignore[method-assign]
 
     # the JIT refreshes the typing and target registries before compiling; numba.pycc does not,
     # and without them some kernels fail to type (an inlined kernel's integer codes)
@@ -227,7 +259,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"built {path} in {time.perf_counter() - t0:.1f} s")
         return 0
     except Exception as exc:  # the log says why; the foreground runs keep using the JIT kernels
-        print(f"building the ahead-of-time kernels failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        why = f"{type(exc).__name__}: {exc}"
+        print(f"building the ahead-of-time kernels failed: {why}", file=sys.stderr)
+        where = folder()
+        if where is not None:
+            try:
+                where.mkdir(parents=True, exist_ok=True)
+                (where / FAILED).write_text(why + "\n", encoding="utf-8")
+            except OSError:
+                pass
         return 1
     finally:
         if args.lock:

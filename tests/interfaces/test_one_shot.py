@@ -117,10 +117,14 @@ def test_prune_caches_keeps_what_is_in_use_and_recent(tmp_path, monkeypatch):
     now = time.time()
     numba_dir, design_dir = tmp_path / "rovlab" / "numba", tmp_path / "rovlab" / "design"
     design_dir.mkdir(parents=True)
-    ages = {"current": 0.0, "yesterday": 1.0, "week": 7.0, "ten": 10.0, "twelve": 12.0, "old": 40.0}
-    for name, age in ages.items():
-        (numba_dir / name).mkdir(parents=True)
+    ages = {"current": 0.0, "today": 0.3, "yesterday": 1.5, "week": 7.0, "ten": 10.0, "twelve": 12.0,
+            "old": 40.0, "compiling": 50.0}
+    for name in ages:
+        (numba_dir / name / "rovlab-ready").mkdir(parents=True)
         (numba_dir / name / "k.nbi").write_bytes(b"x")
+    (numba_dir / "compiling" / "rovlab-ready" / "loop.lock").write_text(str(os.getpid()))  # a live compile
+    (numba_dir / "old" / "rovlab-ready" / "loop.lock").write_text("999999999")  # a dead one's
+    for name, age in ages.items():
         _aged(numba_dir / name, age, now)
     for name, age in {"fresh.pickle": 2.0, "stale.pickle": 30.0}.items():
         (design_dir / name).write_bytes(b"x")
@@ -129,10 +133,11 @@ def test_prune_caches_keeps_what_is_in_use_and_recent(tmp_path, monkeypatch):
     _aged(design_dir / "notes.txt", 90.0, now)
     removed = rovlab.prune_caches(keep=numba_dir / "current", now=now)
     left = sorted(p.name for p in numba_dir.iterdir())
-    # the one in use, then the most recently used up to CACHE_KEEP_RECENT in all; 'old' is past the age limit
-    assert left == sorted(["current", "yesterday", "week", "ten"]), left
+    # the one in use, one used today and one still compiling whatever their rank, then the most
+    # recently used up to CACHE_KEEP_RECENT in all; 'old' is past the age limit
+    assert left == sorted(["current", "today", "yesterday", "week", "compiling"]), left
     assert sorted(p.name for p in design_dir.iterdir()) == ["fresh.pickle", "notes.txt"]
-    assert {p.name for p in removed} == {"twelve", "old", "stale.pickle"}
+    assert {p.name for p in removed} == {"ten", "twelve", "old", "stale.pickle"}
     # without a cache folder at all nothing happens
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "none"))
     assert rovlab.prune_caches() == []

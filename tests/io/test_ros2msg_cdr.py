@@ -14,8 +14,6 @@ import pytest
 from rovlab.io import ros2msg
 from rovlab.io.messages import row_messages, rows_to_messages
 
-dynamic = pytest.importorskip("mcap_ros2._dynamic")
-
 
 def _random_cases(seed: int, n: int):
     rng = random.Random(seed)
@@ -30,6 +28,7 @@ def _random_cases(seed: int, n: int):
 
 
 def test_odometry_and_wrench_bytes_equal_the_general_encoder():
+    dynamic = pytest.importorskip("mcap_ros2._dynamic")
     odo = dynamic.serialize_dynamic(ros2msg.ODOMETRY, ros2msg.ODOMETRY_DEF)[ros2msg.ODOMETRY]
     wre = dynamic.serialize_dynamic(ros2msg.WRENCH_STAMPED, ros2msg.WRENCH_STAMPED_DEF)[ros2msg.WRENCH_STAMPED]
     for t_ns, state, variance, tau in _random_cases(7, 300):
@@ -50,3 +49,22 @@ def test_all_rows_at_once_equal_row_by_row():
     by_row = [m for k in range(n) for m in row_messages(cols, k)]
     assert whole == by_row
     assert len(whole) == 5 * n
+
+
+def test_one_row_as_written_out():
+    cols = {"time_s": np.array([0.0, 0.1]), "true_z": np.array([1.0, 1.5]), "est_z": np.array([0.9, np.nan]),
+            "var_z": np.array([0.01, 0.02]), "status_z_bar30": np.array([0.0, 2.0]),
+            "meas_z_bar30": np.array([np.nan, 1.4]), "ref_z": np.array([2.0, 2.0]), "tau_Z": np.array([3.0, 4.0]),
+            "pwm_t1": np.array([1500.0, 1520.0])}
+    assert list(row_messages(cols, -1)) == [
+        ("/rovlab/truth", 0.1, {"t": 0.1, "state": {"z": 1.5}}),
+        ("/rovlab/estimate", 0.1, {"t": 0.1, "state": {"z": None}, "variance": {"z": 0.02},
+                                   "sensors": {"z_bar30": "lost"}}),
+        ("/rovlab/measurement", 0.1, {"t": 0.1, "values": {"z_bar30": 1.4}}),
+        ("/rovlab/reference", 0.1, {"t": 0.1, "state": {"z": 2.0}}),
+        ("/rovlab/command", 0.1, {"t": 0.1, "tau": {"Z": 4.0}, "pwm_us": {"t1": 1520.0}}),
+    ]
+    for _, _, msg in rows_to_messages(cols):  # plain Python numbers (JSON), not numpy scalars
+        for group in msg.values():
+            values = group.values() if isinstance(group, dict) else [group]
+            assert all(v is None or type(v) in (float, str) for v in values), msg

@@ -176,8 +176,8 @@ def _build_kernels_ahead() -> None:
     background (rovlab._aot), so that later runs skip numba's compiler set-up (~0.5 s)."""
     from rovlab import _aot
 
-    if not _aot.enabled() or _aot.built():
-        return
+    if not _aot.enabled() or _aot.built() or _aot.failed():
+        return  # built, off, or its build failed here (its log says why; the JIT kernels run)
     log = _aot.build_in_background()
     if log:
         print(f"rovlab filter: building its kernels ahead of time in the background, once per version "

@@ -134,6 +134,7 @@ def _messages(groups: Mapping[str, Mapping[str, list[float]]], t: float,
 
 def row_messages(columns: Mapping[str, np.ndarray], k: int) -> Iterator[tuple[str, float, dict[str, Any]]]:
     """The messages of row k of a time-series log."""
+    k = range(len(columns["time_s"]))[k]  # a negative k counts from the end, as indexing does
     yield from _messages(_groups({n: np.asarray(c)[k:k + 1] for n, c in columns.items()}),
                          float(columns["time_s"][k]), 0)
 
