@@ -1,6 +1,6 @@
 """The closed loop of this working tree against an earlier revision, timed in the same run.
 
-    python benchmarks/compare_revisions.py [--base REV] [--rounds N]
+    python benchmarks/compare_revisions.py [--base REV] [--also REV ...] [--rounds N] [--repeat N]
 
 Exports the base revision's ``src/`` into a temporary folder (``git archive``), then times one
 60 s case study (``simulate`` of each packaged case, after a warm-up that also compiles) in
@@ -54,26 +54,34 @@ def _time(src: Path, repeat: int) -> dict[str, float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", default=DEFAULT_BASE, help="git revision to compare against")
+    ap.add_argument("--also", nargs="*", default=[], help="more revisions to time in the same rounds "
+                                                         "(e.g. 3ec9749: the component redesign itself)")
     ap.add_argument("--rounds", type=int, default=3, help="alternating rounds (each a fresh process)")
     ap.add_argument("--repeat", type=int, default=20, help="timed runs per case per round")
     args = ap.parse_args()
+    revs = [args.base, *args.also]
     with tempfile.TemporaryDirectory() as tmp:
-        archive = Path(tmp) / "base.tar"
-        subprocess.run(["git", "-C", str(ROOT), "archive", "-o", str(archive), args.base, "src"], check=True)
-        with tarfile.open(archive) as tf:
-            tf.extractall(tmp, filter="data")
-        trees = {"base": Path(tmp) / "src", "this": ROOT / "src"}
+        trees: dict[str, Path] = {}
+        for i, rev in enumerate(revs):
+            archive = Path(tmp) / f"{i}.tar"
+            subprocess.run(["git", "-C", str(ROOT), "archive", "-o", str(archive), rev, "src"], check=True)
+            with tarfile.open(archive) as tf:
+                tf.extractall(Path(tmp) / str(i), filter="data")
+            trees[rev] = Path(tmp) / str(i) / "src"
+        trees["this"] = ROOT / "src"
+        for src in trees.values():
+            _time(src, 1)  # compile (or load) each tree's loops before any timing
         best: dict[str, dict[str, float]] = {k: {} for k in trees}
         for _ in range(args.rounds):
             for label, src in trees.items():
                 for case, t in _time(src, args.repeat).items():
                     best[label][case] = min(best[label].get(case, float("inf")), t)
-    print(f"== Closed loop, one 60 s case: this tree against {args.base} (best of {args.rounds} x {args.repeat}) ==")
-    print(f"{'case':24s} {'base':>10s} {'this':>10s} {'this/base':>10s}")
-    for case in best["base"]:
-        b, t = best["base"][case], best["this"][case]
-        print(f"{case:24s} {b * 1e3:8.3f} ms {t * 1e3:8.3f} ms {t / b:9.2f}x")
-
+    print(f"== Closed loop, one 60 s case: best of {args.rounds} x {args.repeat}, ratios to {args.base} ==")
+    print(f"{'case':24s} " + " ".join(f"{label[:10]:>18s}" for label in trees))
+    for case in best[args.base]:
+        b = best[args.base][case]
+        print(f"{case:24s} " + " ".join(f"{best[label][case] * 1e3:7.3f} ms {best[label][case] / b:5.2f}x"
+                                        for label in trees))
 
 if __name__ == "__main__":
     main()
