@@ -4,7 +4,8 @@ A process that calls a numba kernel pays once for numba's compiler set-up (its C
 registries, which import scipy.linalg for BLAS): ~0.5-0.7 s on the 2-core machine, loading from
 the disk cache included, on top of numba's import -- most of what ``rovlab filter`` spends
 before reading its log. The same kernels compiled ahead of time (numba.pycc) into an extension
-module load in under a millisecond and never start the compiler.
+module load in under a millisecond and never start the compiler; ``rovlab filter`` on a CSV log
+then does not import numba at all (rovlab._jit.run_without_numba).
 
 The kernels of :data:`KERNELS` are compiled from the same Python functions as the JIT ones and
 for this machine's CPU, each into its own extension module (numba.pycc fails to type one of them

@@ -59,6 +59,42 @@ class LazyKernels:
         return __getattr__
 
 
+_without_numba: list[bool] = []  # set once by run_without_numba() in a process that asks for it
+
+
+def njit(*args: Any, **options: Any) -> Any:
+    """``numba.njit`` for the kernels that ``rovlab filter`` needs (rovlab.core.angles,
+    estimation.fusion, estimation.kalman, io.csvtext): in a process that called
+    :func:`run_without_numba` first, the plain function instead, and numba is never imported."""
+    if _without_numba:
+        if len(args) == 1 and callable(args[0]) and not options:
+            return args[0]
+        return lambda f: f
+    import numba
+
+    return numba.njit(*args, **options)
+
+
+_NUMBA_FREE_IF = ("rovlab.core.angles", "rovlab.estimation.fusion", "rovlab.estimation.kalman", "rovlab.io.csvtext")
+
+
+def run_without_numba() -> bool:
+    """Make the kernels of the modules above plain Python functions in this process, so that a
+    command whose compiled work is done by kernels built ahead of time (rovlab._aot) does not
+    pay numba's import (~0.25 s). Only possible before those modules are imported and while
+    numba is not; returns whether it took effect. Afterwards nothing in the process may compile
+    code that calls them (a kernel call that cannot go to a built module runs interpreted:
+    the same numbers, slowly)."""
+    import sys
+
+    if _without_numba:
+        return True
+    if "numba" in sys.modules or any(m in sys.modules for m in _NUMBA_FREE_IF):
+        return False
+    _without_numba.append(True)
+    return True
+
+
 def use_user_cache_folder() -> None:
     """Make an already imported numba pick up the NUMBA_CACHE_DIR that rovlab set.
 

@@ -23,7 +23,7 @@ from rovlab import _aot
 
 _REPORT = ("import json, sys\nfrom rovlab.interfaces.cli import main\ncode = main({argv!r})\n"
            "print(json.dumps({{'code': code, 'jit_started': 'numba.np.arraymath' in sys.modules, "
-           "'scipy_linalg': 'scipy.linalg' in sys.modules}}), file=sys.stderr)\n")
+           "'scipy_linalg': 'scipy.linalg' in sys.modules, 'numba': 'numba' in sys.modules}}), file=sys.stderr)\n")
 
 
 def _env(cache, aot: str) -> dict[str, str]:
@@ -80,7 +80,7 @@ def test_first_run_builds_in_background_then_runs_without_jit_start_up(tmp_path,
     build_log = next((cache / "rovlab" / "numba").glob("*/rovlab-ready/aot-kernels.log")).read_text()
     assert "built" in build_log, build_log
     status, err = _filter(log, tmp_path / "aot.csv", cache, "1")
-    assert status == {"code": 0, "jit_started": False, "scipy_linalg": False}, (status, err)
+    assert status == {"code": 0, "jit_started": False, "scipy_linalg": False, "numba": False}, (status, err)
     assert "background" not in err
     status, err = _filter(log, tmp_path / "aot2.csv", cache, "1")  # and it is not started again
     assert "background" not in err and not status["jit_started"]

@@ -9,7 +9,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from rovlab._jit import njit  # numba's, or plain in `rovlab filter` with built kernels
 
 TWO_PI = 2.0 * math.pi
 

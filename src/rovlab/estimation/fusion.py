@@ -139,8 +139,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import njit  # numba's, or plain in `rovlab filter` with built kernels
 from rovlab.core.angles import wrap_angle  # noqa: F401  (re-exported for the filter kernels)
 from rovlab.estimation.layout import (  # noqa: F401  (re-exported: the layout and codes live there)
     CFG_ANGLE,

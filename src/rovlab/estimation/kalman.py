@@ -68,9 +68,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from numpy.lib.stride_tricks import as_strided
 
+from rovlab._jit import njit  # numba's, or plain in `rovlab filter` with built kernels
 from rovlab.estimation.fusion import (
     CFG_ANGLE,
     CFG_R,

@@ -164,6 +164,10 @@ def _cmd_filter(args: argparse.Namespace) -> int:
 
     if args.max_gap_steps < 1:
         raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
+    from rovlab import _aot, _jit
+
+    if Path(args.log).suffix.lower() not in (".tlog", ".mcap") and _aot.enabled() and _aot.built():
+        _jit.run_without_numba()  # a CSV log and the kernels built ahead of time: numba is not needed
     vehicle, config, model = _load(args, cached=True)
     _check_initial(config, model)
     _build_kernels_ahead()

@@ -26,7 +26,8 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit
+
+from rovlab._jit import njit  # numba's, or plain in `rovlab filter` with built kernels
 
 _TENS0 = 330
 _TENS = np.array([float(f"1e{j}") for j in range(-_TENS0, 310)])  # the double nearest 10^j (correctly rounded)
