@@ -66,12 +66,12 @@ def main() -> None:
     # where the free-surface terms cost two divisions per evaluation)
     x_dive = x.copy()
     x_dive[2] = 2.0
-    xs, fw = x_dive.copy(), np.zeros(4)
+    xs = x_dive.copy()
     normals = np.zeros((6000, 4), dtype=np.float32)
 
     def dive() -> None:
         xs[:] = x_dive
-        process_advance(p, xs, tau, 0.01, np.zeros(4), normals, fw)
+        process_advance(p, xs, tau, 0.01, np.zeros(4), normals)
 
     t_loop = _timing.per_call(dive) / 6000
     _timing.table("Plant step (physics only)", [

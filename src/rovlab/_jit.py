@@ -156,10 +156,22 @@ def is_compiled(key: str) -> bool:
     return folder is not None and (folder / f"{key}.json").is_file()
 
 
-def mark_compiled(key: str, seconds: float) -> None:
-    """Record that the loop for ``key`` is cached, and how long compiling it took."""
-    import json
+_marked: set[tuple[str, str]] = set()  # (cache folder, key) whose marker this process has seen or written
 
+
+def mark_compiled(key: str, seconds: float) -> None:
+    """Record that the loop for ``key`` is cached, and how long compiling it took (nothing when
+    the loop ran interpreted). Checks the file once per process and key (a Monte Carlo calls
+    this for every run)."""
+    import json
+    import os
+
+    memo = (os.environ.get("NUMBA_CACHE_DIR", ""), key)
+    if memo in _marked:
+        return
+    _marked.add(memo)
+    if interpreting():
+        return
     folder = _ready_folder()
     if folder is None or (folder / f"{key}.json").is_file():
         return

@@ -21,6 +21,7 @@ seed whatever compiles the loop.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -28,7 +29,7 @@ from numba import njit
 
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import register_plant
-from rovlab.models.kinetics import P_BUOY, P_WEIGHT, rk4_inplace, submerged
+from rovlab.models.kinetics import P_BUOY, P_WEIGHT, rk4_scalars, submerged
 
 
 class ProcessPlant(NamedTuple):
@@ -42,7 +43,6 @@ class ProcessPlant(NamedTuple):
     noise_std: np.ndarray  # sqrt(W / h_plant) of the white force noise (4)
     h: float  # RK4 step [s]
     n_sub: int  # RK4 steps per control step
-    f: np.ndarray  # (4) work
     tb: np.ndarray  # (4) work
     p_sets: np.ndarray  # (n_sets, P_SIZE): the parameters after each truth event (row 0 = p)
     dist: np.ndarray  # (2): parameter set and extra heave force [N] of the last step
@@ -80,17 +80,24 @@ def _process_truth(plant, truth):
 
 
 @njit(cache=True)
-def process_advance(p, x, tau_b, h, noise_std, normals, f):
+def process_advance(p, x, tau_b, h, noise_std, normals):
     """Advance the process plant over len(normals) RK4 steps of length h (in place).
 
     tau_b (4) is the thruster force plus the bias, held over the control period (ZOH);
     normals (n_sub, 4) are standard normal draws and noise_std (4) = sqrt(W / h) scales them
-    into the white force noise of each step. f (4) is a work array.
+    into the white force noise of each step. The state, and the cosine and sine of its heading,
+    stay in registers between the steps (rovlab.models.kinetics.rk4_scalars); x is read and the
+    heading's sine and cosine evaluated once per call, i.e. once per control period.
     """
+    x0, x1, x2, x3, x4, x5, x6, x7 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]
+    t0, t1, t2, t3 = tau_b[0], tau_b[1], tau_b[2], tau_b[3]
+    s0, s1, s2, s3 = noise_std[0], noise_std[1], noise_std[2], noise_std[3]
+    c, s = math.cos(x3), math.sin(x3)
     for j in range(normals.shape[0]):
-        for i in range(4):
-            f[i] = tau_b[i] + noise_std[i] * normals[j, i]
-        rk4_inplace(p, x, f, h)
+        x0, x1, x2, x3, x4, x5, x6, x7, c, s = rk4_scalars(
+            p, c, s, x0, x1, x2, x3, x4, x5, x6, x7, t0 + s0 * normals[j, 0], t1 + s1 * normals[j, 1],
+            t2 + s2 * normals[j, 2], t3 + s3 * normals[j, 3], h)
+    x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7] = x0, x1, x2, x3, x4, x5, x6, x7
 
 
 @njit(cache=True, inline="always")
@@ -103,7 +110,7 @@ def _process_step(plant, drive, row, tau_cmd, tau_real):
     tau_b[2] += extra
     j = drive.pset[row]
     process_advance(plant.p_sets[j], plant.x, tau_b, plant.h, plant.noise_std,
-                    drive.plant_normals[row * n:(row + 1) * n], plant.f)
+                    drive.plant_normals[row * n:(row + 1) * n])
     plant.dist[0] = j
     plant.dist[1] = extra
     for i in range(4):
@@ -123,20 +130,30 @@ def _observer_truth(plant, truth):
     truth[11] = x[5]
 
 
-@njit(cache=True)
-def linear_advance(Phi, Delta, L, x, u, normals, tmp):
-    """Advance x <- Phi x + Delta u + L n over len(normals) exact steps (in place)."""
-    m = x.shape[0]
+@njit(cache=True, inline="always")
+def _linear_steps(Phi, Delta, L, x, u, normals, tmp, m, p):
     for s in range(normals.shape[0]):
         for i in range(m):
             acc = 0.0
             for j in range(m):
                 acc += Phi[i, j] * x[j] + L[i, j] * normals[s, j]
-            for j in range(u.shape[0]):
+            for j in range(p):
                 acc += Delta[i, j] * u[j]
             tmp[i] = acc
         for i in range(m):
             x[i] = tmp[i]
+
+
+@njit(cache=True)
+def linear_advance(Phi, Delta, L, x, u, normals, tmp):
+    """Advance x <- Phi x + Delta u + L n over len(normals) exact steps (in place).
+
+    The depth-and-heading model's sizes (6 states, 2 inputs) are passed as constants, which
+    lets the compiler unroll the sums (~30 % faster, the same sums in the same order)."""
+    if x.shape[0] == 6 and u.shape[0] == 2:
+        _linear_steps(Phi, Delta, L, x, u, normals, tmp, 6, 2)
+    else:
+        _linear_steps(Phi, Delta, L, x, u, normals, tmp, x.shape[0], u.shape[0])
 
 
 @njit(cache=True, inline="always")

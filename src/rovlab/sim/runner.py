@@ -358,7 +358,7 @@ def make_plant(design: Design, sc: Scenario, truth: Vehicle, n_sub: int,
     return ProcessPlant(p, sc.initial.astype(float).copy(), np.asarray(bias0, dtype=float).copy(),
                         np.asarray(phi, dtype=float), np.asarray(std, dtype=float),
                         np.sqrt(sc.process_noise_psd / sc.plant_step_s), float(sc.plant_step_s), int(n_sub),
-                        np.empty(4), np.empty(4), p_sets, np.zeros(2))
+                        np.empty(4), p_sets, np.zeros(2))
 
 
 def _load_ref(sc: Scenario, key: str, loader: Callable[[str], Any], book: DesignBook) -> Any:
@@ -432,8 +432,7 @@ class Simulation:
                     prep.actuators, prep.nav_of, prep.nees_idx, drive, logs)
         if loop is run_loop and not self._marked:  # compiled or loaded from the disk cache
             self._marked = True
-            if not _jit.interpreting():
-                _jit.mark_compiled(prep.loop_key, time.perf_counter() - t0)
+            _jit.mark_compiled(prep.loop_key, time.perf_counter() - t0)
         self.k += done
         if done < n:
             raise PlantDiverged(self.k * prep.h, logs, done)

@@ -53,7 +53,6 @@ class VehicleSimulation:
         psd = np.zeros(4) if process_noise_psd is None else np.asarray(process_noise_psd, dtype=float)
         self._noise_std = np.sqrt(psd / self.h)
         self._rng = np.random.default_rng(seed)
-        self._f = np.empty(4)
         self.time = 0.0
         self._sensor_noise = sensor_noise
         self._pressure = _first(vehicle, "pressure")
@@ -84,7 +83,7 @@ class VehicleSimulation:
         if n < 1:
             return 0
         normals = self._rng.standard_normal((n, 4))
-        process_advance(self.p, self.x, self.tau.copy(), self.h, self._noise_std, normals, self._f)
+        process_advance(self.p, self.x, self.tau.copy(), self.h, self._noise_std, normals)
         self.time += n * self.h
         return n
 
