@@ -167,11 +167,9 @@ def mark_compiled(key: str, seconds: float) -> None:
     import os
 
     memo = (os.environ.get("NUMBA_CACHE_DIR", ""), key)
-    if memo in _marked:
+    if memo in _marked or interpreting():
         return
     _marked.add(memo)
-    if interpreting():
-        return
     folder = _ready_folder()
     if folder is None or (folder / f"{key}.json").is_file():
         return

@@ -146,14 +146,16 @@ def test_small_angle_cos_sin_is_math_cos_sin_to_rounding():
     assert math.isnan(c) and math.isnan(s)
 
 
-def test_plant_rk4_by_angle_addition_equals_sin_cos_at_every_stage(udrone):
+@pytest.mark.parametrize("current", [(0.0, 0.0), (0.3, -0.2)])
+def test_plant_rk4_by_angle_addition_equals_sin_cos_at_every_stage(udrone, current):
     """The simulator's RK4 turns the heading's cosine and sine by the stage increments instead of
     evaluating them (rovlab.models.kinetics.rk4_scalars): 60 s at 100 Hz while the vehicle turns
     ~8 full circles ends where the textbook RK4 (sin and cos of every stage's heading) ends, to
-    rounding."""
+    rounding, with or without a current (whose rotation into body axes uses the heading too)."""
     from rovlab.sim.plant import process_advance
 
     p = k.pack(udrone)
+    p[k.P_VC:k.P_VC + 2] = current
     x0 = np.array([0.0, 0.0, 2.0, 3.0, 0.3, 0.0, 0.0, 0.0])
     tau = np.array([8.0, 0.0, 5.0, 1.5])  # forward, down and a yaw moment: a steady spiral
     rng = np.random.default_rng(3)
@@ -181,3 +183,13 @@ def test_plant_rk4_by_angle_addition_equals_sin_cos_at_every_stage(udrone):
     ref = reference(x0)
     assert ref[3] - x0[3] > 8 * 2 * math.pi  # it did turn
     np.testing.assert_allclose(x, ref, rtol=0.0, atol=1e-12)
+    once = x0.copy()  # one call for the whole run (as rovlab.sim.vehicle does): the same to rounding
+    process_advance(p, once, tau, 0.01, noise_std, normals)
+    np.testing.assert_allclose(once, ref, rtol=0.0, atol=1e-12)
+
+
+def test_submerged_fraction_keeps_nan():
+    p = np.zeros(k.P_SIZE)
+    p[k.P_HALF_H] = 0.1
+    assert k.submerged(p, 0.5) == 1.0 and k.submerged(p, -0.5) == 0.0 and k.submerged(p, 0.0) == 0.5
+    assert math.isnan(k.submerged(p, math.nan))

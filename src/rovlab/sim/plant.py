@@ -1,7 +1,7 @@
 """Plants for the closed-loop simulator: components of the plant slot (rovlab.core.components).
 
 * :class:`ProcessPlant` (Sandøy 2016, ch. 3): x = [x, y, z, psi, u, v, w, r] integrated with
-  fixed-step RK4 on the one right-hand side of the model (rovlab.models.kinetics.rhs_into); the
+  fixed-step RK4 on the one right-hand side of the model (rovlab.models.kinetics.rk4_scalars); the
   force on the body is tau (from the thrusters) + b (Gauss-Markov biases, advanced with their
   exact discrete form) + w_nu (white noise of power spectral density W, held over each RK4 step
   as N(0, W / h), the zero-order-hold equivalent of white noise). The restoring force is in the
@@ -87,7 +87,7 @@ def process_advance(p, x, tau_b, h, noise_std, normals):
     normals (n_sub, 4) are standard normal draws and noise_std (4) = sqrt(W / h) scales them
     into the white force noise of each step. The state, and the cosine and sine of its heading,
     stay in registers between the steps (rovlab.models.kinetics.rk4_scalars); x is read and the
-    heading's sine and cosine evaluated once per call, i.e. once per control period.
+    heading's sine and cosine evaluated once per call (once per control period in the loop).
     """
     x0, x1, x2, x3, x4, x5, x6, x7 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]
     t0, t1, t2, t3 = tau_b[0], tau_b[1], tau_b[2], tau_b[3]
