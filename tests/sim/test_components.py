@@ -191,3 +191,27 @@ def test_a_simulations_timeseries_feeds_rovlab_filter_directly(tmp_path):
     np.testing.assert_allclose(off["est_z"], sim["est_z"], atol=1e-6)
     np.testing.assert_allclose(off["est_b_w"], sim["est_b_w"], atol=1e-4)
     assert (tmp_path / "est.csv.json").exists() and "#" not in est.read_text(encoding="utf-8")[:200]
+
+
+def test_actuators_skip_the_real_thrust_only_where_nothing_feels_it():
+    """The observer plant takes the achieved wrench, so its runs skip the thrust the PWM commands
+    really give (make_actuators(real=False)); the process plant keeps it. With the real thrust
+    skipped, tau_real is the achieved wrench; the achieved wrench and the PWM are the same."""
+    from rovlab.sim.actuators import actuate
+    from rovlab.sim.runner import prepare
+    from rovlab.sim.scenario import load_scenario
+
+    assert prepare(load_scenario("step-process-model")).actuators.real
+    obs = prepare(load_scenario("step-observer-model")).actuators
+    assert not obs.real
+    a = obs._replace(real=True)
+    tau = np.array([0.0, 0.0, 12.0, 0.8])
+    out = {}
+    for name, act in (("real", a), ("skip", obs)):
+        tc, tr, pwm = np.zeros(4), np.full(4, np.nan), np.zeros(act.rows.shape[0])
+        actuate(act, tau, tc, tr, pwm)
+        out[name] = (tc, tr, pwm)
+    np.testing.assert_array_equal(out["real"][0], out["skip"][0])
+    np.testing.assert_array_equal(out["real"][2], out["skip"][2])
+    np.testing.assert_array_equal(out["skip"][1], out["skip"][0])
+    assert np.all(np.isfinite(out["real"][1])) and not np.array_equal(out["real"][1], out["real"][0])  # PWM quantised

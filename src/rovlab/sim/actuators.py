@@ -38,20 +38,25 @@ class Actuators(NamedTuple):
     frac: np.ndarray  # (6) work: achieved share per DOF
     cmd: np.ndarray  # (n) work: PWM commands
     f_real: np.ndarray  # (n) work: the thrust they give
+    real: bool  # compute the real thrust (tau_real); False when nothing feels it (observer plant, vehicle node)
 
 
-def make_actuators(allocator: Allocator, bank: ThrusterBank, B_true: np.ndarray, pwm_res: float) -> Actuators:
+def make_actuators(allocator: Allocator, bank: ThrusterBank, B_true: np.ndarray, pwm_res: float, *,
+                   real: bool = True) -> Actuators:
+    """The actuators of a run. ``real=False`` skips the thrust the PWM commands really give
+    (tau_real is then the achieved wrench) where nothing feels it: the observer plant takes the
+    achieved wrench, and a vehicle node has the real thrusters."""
     return Actuators(allocator.B, allocator.T, allocator._s, allocator.f_min, allocator.f_max, allocator.level,
                      int(allocator.n_levels), np.ascontiguousarray(B_true, dtype=float), bank.rows, bank.grid_pwm,
                      bank.grid_force, float(pwm_res), np.zeros(6),
                      np.zeros(allocator.B.shape[1]), np.ones(6), np.zeros(bank.rows.shape[0]),
-                     np.zeros(bank.rows.shape[0]))
+                     np.zeros(bank.rows.shape[0]), bool(real))
 
 
 @njit(cache=True, inline="always")
 def actuate(act, tau, tau_cmd, tau_real, pwm):
     """Allocate the demanded wrench tau (4); fill the achieved wrench tau_cmd (4), the real one
-    tau_real (4) and the PWM commands pwm (n thrusters)."""
+    tau_real (4; the achieved one when act.real is False) and the PWM commands pwm (n thrusters)."""
     tau6 = act.tau6
     tau6[:] = 0.0
     tau6[0] = tau[0]
@@ -68,14 +73,23 @@ def actuate(act, tau, tau_cmd, tau_real, pwm):
             cmd[i] = act.pwm_res * np.round(cmd[i] / act.pwm_res)
     for i in range(nt):
         pwm[i] = cmd[i]
-    f_real = act.f_real
-    bank_force_into(act.rows, act.grid_pwm, act.grid_force, cmd, f_real)
-    for a in range(4):
-        r = _DOF6[a]
-        acc = 0.0
-        acc_real = 0.0
-        for i in range(nt):
-            acc += act.B[r, i] * f[i]
-            acc_real += act.B_true[r, i] * f_real[i]
-        tau_cmd[a] = acc
-        tau_real[a] = acc_real
+    if act.real:
+        f_real = act.f_real
+        bank_force_into(act.rows, act.grid_pwm, act.grid_force, cmd, f_real)
+        for a in range(4):
+            r = _DOF6[a]
+            acc = 0.0
+            acc_real = 0.0
+            for i in range(nt):
+                acc += act.B[r, i] * f[i]
+                acc_real += act.B_true[r, i] * f_real[i]
+            tau_cmd[a] = acc
+            tau_real[a] = acc_real
+    else:
+        for a in range(4):
+            r = _DOF6[a]
+            acc = 0.0
+            for i in range(nt):
+                acc += act.B[r, i] * f[i]
+            tau_cmd[a] = acc
+            tau_real[a] = acc

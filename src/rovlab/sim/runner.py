@@ -228,7 +228,7 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     same = truth.thrusters is vehicle.thrusters
     bank = alloc.bank if same else ThrusterBank.from_vehicle(truth)
     B_true = alloc.B if same else Allocator(truth).B
-    actuators = make_actuators(alloc, bank, B_true, sc.pwm_resolution_us)
+    actuators = make_actuators(alloc, bank, B_true, sc.pwm_resolution_us, real=sc.plant == "process")
     nav_of = np.array([TRUTH_INDEX[q] for q in est.nav], dtype=np.int64)
     nees = [i for i, q in enumerate(est.nav) if sc.plant == "observer" or not q.startswith("b_")]
     return Prepared(sc, vehicle, truth, config, design, plant, sensors, actuators, drive, n_ctrl, h, nav_of,
