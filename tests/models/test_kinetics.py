@@ -150,7 +150,7 @@ def test_small_angle_cos_sin_is_math_cos_sin_to_rounding():
 def test_plant_rk4_by_angle_addition_equals_sin_cos_at_every_stage(udrone, current):
     """The simulator's RK4 turns the heading's cosine and sine by the stage increments instead of
     evaluating them (rovlab.models.kinetics.rk4_scalars): 60 s at 100 Hz while the vehicle turns
-    ~8 full circles ends where the textbook RK4 (sin and cos of every stage's heading) ends, to
+    more than 8 full circles ends where the textbook RK4 (sin and cos of every stage's heading) ends, to
     rounding, with or without a current (whose rotation into body axes uses the heading too)."""
     from rovlab.sim.plant import process_advance
 

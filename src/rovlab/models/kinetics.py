@@ -154,7 +154,7 @@ def submerged(p, z):
     hh = p[P_HALF_H]
     # deep (almost always): exactly what the clamped formula gives (finite z), without its division. Written
     # as one conditional expression over min/max rather than with early returns: inlined four
-    # times per RK4 step, the branchy form cost the plant ~12 % (benchmarks/compare_revisions.py)
+    # times per RK4 step, the branchy form cost the plant ~12 % (timed on 6010 RK4 steps)
     return 1.0 if z >= hh else min(max((z + hh) / (2.0 * hh), 0.0), 1.0)  # (NaN stays NaN)
 
 

@@ -38,14 +38,15 @@ class Actuators(NamedTuple):
     frac: np.ndarray  # (6) work: achieved share per DOF
     cmd: np.ndarray  # (n) work: PWM commands
     f_real: np.ndarray  # (n) work: the thrust they give
-    real: bool  # compute the real thrust (tau_real); False when nothing feels it (observer plant, vehicle node)
+    real: bool  # compute the real thrust (tau_real); False when nothing feels it (the observer plant)
 
 
 def make_actuators(allocator: Allocator, bank: ThrusterBank, B_true: np.ndarray, pwm_res: float, *,
                    real: bool = True) -> Actuators:
     """The actuators of a run. ``real=False`` skips the thrust the PWM commands really give
     (tau_real is then the achieved wrench) where nothing feels it: the observer plant takes the
-    achieved wrench, and a vehicle node has the real thrusters."""
+    achieved wrench (rovlab.sim.runner). The vehicle node keeps the default: it reports tau_real
+    (rovlab.sim.step.control_step)."""
     return Actuators(allocator.B, allocator.T, allocator._s, allocator.f_min, allocator.f_max, allocator.level,
                      int(allocator.n_levels), np.ascontiguousarray(B_true, dtype=float), bank.rows, bank.grid_pwm,
                      bank.grid_force, float(pwm_res), np.zeros(6),
@@ -73,7 +74,7 @@ def actuate(act, tau, tau_cmd, tau_real, pwm):
             cmd[i] = act.pwm_res * np.round(cmd[i] / act.pwm_res)
     for i in range(nt):
         pwm[i] = cmd[i]
-    if act.real:
+    if act.real:  # the achieved and the real wrench in one pass (measured faster than two)
         f_real = act.f_real
         bank_force_into(act.rows, act.grid_pwm, act.grid_force, cmd, f_real)
         for a in range(4):
