@@ -59,6 +59,12 @@ class LazyKernels:
         return __getattr__
 
 
+# numba's option (private, stable since numba 0.4x) for a function compiled without reference
+# counting: the closed loop and the node's control step (rovlab.sim.loop explains why), and its
+# opposite for a function they call that allocates, which would otherwise inherit it
+WITHOUT_NRT: dict[str, Any] = {"_nrt": False}
+WITH_NRT: dict[str, Any] = {"_nrt": True}
+
 _without_numba: list[bool] = []  # set once by run_without_numba() in a process that asks for it
 
 

@@ -17,7 +17,7 @@ from rovlab.params.validate import ConfigError, read_toml
 from rovlab.sim import components as registry
 from rovlab.sim.live import LiveSimulation
 from rovlab.sim.montecarlo import run_many
-from rovlab.sim.runner import PlantDiverged, Simulation, prepare, run_prepared
+from rovlab.sim.runner import PlantDiverged, Simulation, first_rows, prepare, run_prepared
 from rovlab.sim.scenario import load_scenario, load_scenario_data
 
 
@@ -75,6 +75,43 @@ def test_a_new_controller_is_one_module_plus_its_registration(hold_registered):
                             "print(len(simulate('step-process-model').columns['time_s']))"],
                            capture_output=True, text=True, timeout=600, cwd="/")
     assert other.returncode == 0 and other.stdout.strip() == "601", other.stderr[-2000:]
+
+
+class AllocatingDepth(NamedTuple):
+    """A P law on depth written carelessly: it allocates a temporary array at every step."""
+
+    kp: float
+    state: np.ndarray
+
+
+@njit(cache=False)
+def _allocating_step(ctrl, t, nav, ref, tau):
+    e = np.empty(4)  # not allowed inside the loop (compiled without reference counting)
+    e[2] = ref[2] - nav[2]
+    tau[0] = 0.0
+    tau[1] = 0.0
+    tau[2] = ctrl.kp * e[2]
+    tau[3] = 0.0
+
+
+register_controller(AllocatingDepth, state=("state",), step=_allocating_step)
+
+
+def test_a_kernel_that_allocates_inside_the_loop_is_refused_with_the_line_and_the_remedy(monkeypatch):
+    def build(vehicle, config):
+        return ControllerSpec(kernel=AllocatingDepth(40.0, np.zeros(0)), needs=("z",), references=("z",),
+                              outputs=("Z",), state_names=())
+
+    monkeypatch.setitem(registry.CONTROLLERS, "allocating", build)
+    from dataclasses import replace
+
+    prep = prepare(replace(load_scenario("step-process-model"), controller="allocating"))
+    with pytest.raises(TypeError) as err:
+        Simulation(prep).advance(first_rows(prep.drive, 2))
+    text = str(err.value)
+    assert "AllocatingDepth allocates memory" in text and "inside the closed loop" in text
+    assert f"{__file__}, line" in text  # where: numba's report, made readable
+    assert "_nrt=True" in text and "fields of the component" in text and "returns no array" in text  # what to do
 
 
 def test_unknown_components_and_missing_estimates_are_refused_by_name():
@@ -215,3 +252,24 @@ def test_actuators_skip_the_real_thrust_only_where_nothing_feels_it():
     np.testing.assert_array_equal(out["real"][2], out["skip"][2])
     np.testing.assert_array_equal(out["skip"][1], out["skip"][0])
     assert np.all(np.isfinite(out["real"][1])) and not np.array_equal(out["real"][1], out["real"][0])  # PWM quantised
+
+
+def test_no_compiled_function_in_sim_takes_more_than_15_parameters():
+    """Issue 9: components travel as NamedTuples, so the loop, the node's step and the plants
+    keep short signatures (the monolithic loop took 52 positional arguments)."""
+    import importlib
+    import inspect
+    import pkgutil
+
+    import rovlab.sim
+
+    checked = {}
+    for info in pkgutil.iter_modules(rovlab.sim.__path__):
+        module = importlib.import_module(f"rovlab.sim.{info.name}")
+        for name, obj in vars(module).items():
+            fn = getattr(obj, "py_func", None)
+            if fn is not None and fn.__module__ == module.__name__:
+                checked[f"{module.__name__}.{name}"] = len(inspect.signature(fn).parameters)
+    assert "rovlab.sim.loop.run_loop" in checked and "rovlab.sim.step.control_step" in checked
+    too_many = {k: v for k, v in checked.items() if v > 15}
+    assert not too_many, too_many

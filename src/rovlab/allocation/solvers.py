@@ -44,7 +44,9 @@ def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarra
     return s[:, None] * np.linalg.pinv(B * s[None, :])
 
 
-_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True)
+# _nrt=True: some allocate, and the closed loop that calls them is compiled without reference
+# counting, which they would otherwise inherit (rovlab.sim.loop)
+_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True, _nrt=True)
 __getattr__ = _kernels.module_getattr(__name__)  # allocate_kernel, matvec: numba dispatchers (on first use)
 
 

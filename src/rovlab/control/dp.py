@@ -119,16 +119,19 @@ def _dp_step(ctrl, t, nav, ref, tau):
             s[_ACC + i] = 0.0
             s[_INT + i] = 0.0
         s[_STARTED] = 1.0
-    # NED errors (heading wrapped) against the reference model's pose
-    e = np.empty(4)
-    for i in range(3):
-        e[i] = nav[i] - s[_ETA + i]
-    e[3] = wrap_angle(nav[3] - s[_ETA + 3])
-    for i in range(4):
-        s[_ERR + i] = e[i]
+    # NED errors (heading wrapped) against the reference model's pose (scalars: the closed loop
+    # allocates nothing, rovlab.sim.loop.run_loop)
+    e0 = nav[0] - s[_ETA + 0]
+    e1 = nav[1] - s[_ETA + 1]
+    e2 = nav[2] - s[_ETA + 2]
+    e3 = wrap_angle(nav[3] - s[_ETA + 3])
+    s[_ERR + 0] = e0
+    s[_ERR + 1] = e1
+    s[_ERR + 2] = e2
+    s[_ERR + 3] = e3
     # NED force of position and integral terms, and the reference's velocity/acceleration, in body axes
-    fx = ctrl.Kp[0] * e[0] + ctrl.Ki[0] * s[_INT + 0]
-    fy = ctrl.Kp[1] * e[1] + ctrl.Ki[1] * s[_INT + 1]
+    fx = ctrl.Kp[0] * e0 + ctrl.Ki[0] * s[_INT + 0]
+    fy = ctrl.Kp[1] * e1 + ctrl.Ki[1] * s[_INT + 1]
     vx, vy = s[_VEL + 0], s[_VEL + 1]
     ax, ay = s[_ACC + 0], s[_ACC + 1]
     u_d = c * vx + sn * vy
@@ -137,9 +140,9 @@ def _dp_step(ctrl, t, nav, ref, tau):
     dv_d = -sn * ax + c * ay
     tau[0] = (ctrl.M[0] * du_d + _damping(ctrl, 0, u_d) - (c * fx + sn * fy) - ctrl.Kd[0] * (nav[4] - u_d) - nav[8])
     tau[1] = (ctrl.M[1] * dv_d + _damping(ctrl, 1, v_d) - (-sn * fx + c * fy) - ctrl.Kd[1] * (nav[5] - v_d) - nav[9])
-    tau[2] = (ctrl.M[2] * s[_ACC + 2] + _damping(ctrl, 2, s[_VEL + 2]) - ctrl.Kp[2] * e[2] - ctrl.Ki[2] * s[_INT + 2]
+    tau[2] = (ctrl.M[2] * s[_ACC + 2] + _damping(ctrl, 2, s[_VEL + 2]) - ctrl.Kp[2] * e2 - ctrl.Ki[2] * s[_INT + 2]
               - ctrl.Kd[2] * (nav[6] - s[_VEL + 2]) - nav[10])
-    tau[3] = (ctrl.M[3] * s[_ACC + 3] + _damping(ctrl, 3, s[_VEL + 3]) - ctrl.Kp[3] * e[3] - ctrl.Ki[3] * s[_INT + 3]
+    tau[3] = (ctrl.M[3] * s[_ACC + 3] + _damping(ctrl, 3, s[_VEL + 3]) - ctrl.Kp[3] * e3 - ctrl.Ki[3] * s[_INT + 3]
               - ctrl.Kd[3] * (nav[7] - s[_VEL + 3]) - nav[11])
     # advance the reference model toward the set-point (heading: the short way round)
     for i in range(4):
@@ -159,11 +162,7 @@ def _dp_actuated(ctrl, t, tau_demanded, tau_achieved):
     c, sn = math.cos(psi), math.sin(psi)
     dx = tau_achieved[0] - tau_demanded[0]
     dy = tau_achieved[1] - tau_demanded[1]
-    d = np.empty(4)
-    d[0] = c * dx - sn * dy
-    d[1] = sn * dx + c * dy
-    d[2] = tau_achieved[2] - tau_demanded[2]
-    d[3] = tau_achieved[3] - tau_demanded[3]
+    d = (c * dx - sn * dy, sn * dx + c * dy, tau_achieved[2] - tau_demanded[2], tau_achieved[3] - tau_demanded[3])
     for i in range(4):
         if ctrl.Ki[i] > 0.0:
             # PID output u = -(K_p e + K_i xi): xi' = e - (k_t / K_i) d moves u toward what was achieved

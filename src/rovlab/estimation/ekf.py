@@ -43,6 +43,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import expm
 
+from rovlab._jit import WITH_NRT
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import EstimatorSpec, register_estimator
 from rovlab.estimation.fusion import new_channel_state
@@ -205,7 +206,7 @@ def van_loan(A, W, h, F):
     return Phi, Q
 
 
-@njit(cache=True)
+@njit(cache=True, **WITH_NRT)  # allocates: explicit, as the closed loop that calls it is compiled without NRT
 def ekf_predict(p, inv_T, W, h, n_sub, x, P, tau, A, A8, F, k, xs, f):
     """Project (x, P) over one sample with the wrench tau (4) held (in place). A non-finite tau
     entry is taken as 0 (as the linear filter does)."""

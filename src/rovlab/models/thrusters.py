@@ -86,7 +86,9 @@ def t200_force_table(voltage: float) -> np.ndarray:
 # Kernels on packed rows: plain Python in rovlab.models.thruster_kernels, compiled on first use
 # --------------------------------------------------------------------------------------------
 
-_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True)
+# _nrt=True: some allocate, and the closed loop that calls them is compiled without reference
+# counting, which they would otherwise inherit (rovlab.sim.loop)
+_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True, _nrt=True)
 __getattr__ = _kernels.module_getattr(__name__)  # bank_force, bank_pwm: numba dispatchers
 
 

@@ -25,11 +25,14 @@ and a long run can be done in chunks (the live HMI does) with the same result.
 from __future__ import annotations
 
 import math
+import os
+import re
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
+from rovlab._jit import WITHOUT_NRT
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
     N_TRUTH,
@@ -60,6 +63,28 @@ class Drive(NamedTuple):
     refs: np.ndarray  # (n, 4): reference [x, y, z, psi]
     heave_force: np.ndarray  # (n,): extra downward heave force on the plant [N] (tether pull ...)
     pset: np.ndarray  # (n,) int64: which of the plant's parameter sets holds (truth events)
+
+
+class Work(NamedTuple):
+    """The loop's scratch arrays (allocated by the caller: the loop itself allocates nothing)."""
+
+    rep: np.ndarray  # (m, N_REP) what the estimator did with each sample
+    y: np.ndarray  # (m) samples
+    present: np.ndarray  # (m) bool
+    truth: np.ndarray  # (N_TRUTH)
+    nav: np.ndarray  # (N_TRUTH) the estimate in the truth layout, for the controller
+    err: np.ndarray  # (NEES states)
+    chol: np.ndarray  # (NEES states, NEES states)
+    tau: np.ndarray  # (4) demanded wrench
+    tau_cmd: np.ndarray  # (4) achieved wrench
+    tau_real: np.ndarray  # (4) real wrench
+    pwm: np.ndarray  # (thrusters)
+
+
+def new_work(m: int, n_nees: int, n_thrusters: int) -> Work:
+    return Work(np.empty((m, N_REP)), np.empty(m), np.empty(m, dtype=np.bool_), np.empty(N_TRUTH), np.zeros(N_TRUTH),
+                np.empty(n_nees), np.empty((n_nees, n_nees)), np.zeros(4), np.zeros(4), np.zeros(4),
+                np.empty(n_thrusters))
 
 
 class Logs(NamedTuple):
@@ -119,12 +144,13 @@ def _nees(err, P, idx, L):
     return total
 
 
-@njit(cache=True)
-def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive, logs):
+@njit(cache=True, **WITHOUT_NRT)
+def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive, logs, work):
     """Run control steps k0 .. k1-1 (t_k = k h). The components' state arrays are advanced in
     place; ``drive`` and ``logs`` are indexed by row = k - k0. Returns the number of rows done:
     k1 - k0, or fewer if the plant's true state stopped being finite (or beyond 1e9), in which
-    case the run stops there rather than log garbage.
+    case the run stops there rather than log garbage. ``work`` holds its scratch arrays
+    (:func:`new_work`).
 
     nav_of (int64, n_x): the TRUTH index each estimator state estimates; nees_idx (int64): the
     estimator states whose error enters the NEES (those the plant has a truth for); angle states
@@ -134,17 +160,9 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
     m = sensors.quantity.shape[0]
     nt = act.rows.shape[0]
     n_nees = nees_idx.shape[0]
-    rep = np.empty((m, N_REP))
-    y = np.empty(m)
-    present = np.empty(m, dtype=np.bool_)
-    truth = np.empty(N_TRUTH)
-    nav = np.zeros(N_TRUTH)
-    err = np.empty(n_nees)
-    chol = np.empty((n_nees, n_nees))
-    tau = np.zeros(4)
-    tau_cmd = np.zeros(4)
-    tau_real = np.zeros(4)
-    pwm = np.empty(nt)
+    rep, y, present, truth, nav, err, chol = work.rep, work.y, work.present, work.truth, work.nav, work.err, work.chol
+    tau, tau_cmd, tau_real, pwm = work.tau, work.tau_cmd, work.tau_real, work.pwm
+    nav[:] = 0.0
     # bound once: array fields read in the loop body
     x = est.x
     P = est.P
@@ -208,11 +226,55 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
     return k1 - k0
 
 
+# What numba says when code compiled without reference counting (the loop, and what it inlines or
+# compiles for it) needs the runtime's memory: a new array, list or string, or an exception built
+# from a value known only at run time.
+_ALLOCATION_MARKS = ("Only accept returning of array passed into the function as argument",
+                     "NRT required but not enabled")
+
+
+def allocation_error(exc: BaseException, components: tuple[object, ...]) -> TypeError | None:
+    """A clear error for a compile failure of the loop (or the node's step) caused by a component
+    kernel that allocates (np.empty, an array expression, a list, a string, an exception with a
+    run-time message), naming the components and the line numba points at; None for any other
+    exception."""
+    text = str(exc)
+    if not type(exc).__module__.startswith("numba") or not any(m in text for m in _ALLOCATION_MARKS):
+        return None
+    where = re.search(r'File "([^"]+)", line (\d+)', text)
+    line = f" (numba points at {os.path.abspath(where.group(1))}, line {where.group(2)})" if where else ""
+    names = ", ".join(type(c).__name__ for c in components)
+    return TypeError(
+        f"a kernel of the components {names} allocates memory (an array, a list, a string or an exception "
+        f"message built at run time) inside the closed loop{line}. The loop is compiled without numba's "
+        "reference counting, so its kernels must not allocate: keep scratch arrays as fields of the component "
+        "(see docs/architecture.md), or move the work into a separate njit function decorated with _nrt=True "
+        "that allocates inside and returns no array (an array it returned would never be freed)")
+
+
+class explain_allocation:
+    """``with explain_allocation(components): loop(...)``: a compile failure caused by a kernel
+    that allocates leaves as :func:`allocation_error`'s TypeError (the simulator and the node use
+    it around their first compiled call); anything else passes unchanged."""
+
+    def __init__(self, components: tuple[object, ...]) -> None:
+        self.components = components
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: object) -> None:
+        if exc is not None and isinstance(exc, Exception):
+            clear = allocation_error(exc, self.components)
+            if clear is not None:
+                raise clear from exc
+
+
 # numba keeps one cache index per function, listing every signature compiled for it. A component
 # class defined outside rovlab (a user's script, a test module) in that index would make the
 # index unreadable in any process that cannot import that module, so loops with such components
 # are compiled by this uncached copy instead (per process).
-run_loop_uncached = njit(cache=False)(getattr(run_loop, "py_func", run_loop))
+run_loop_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(run_loop, "py_func", run_loop))
 
 
 def loop_for(*components: object):

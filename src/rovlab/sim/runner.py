@@ -42,7 +42,7 @@ from rovlab.params.vehicle import Vehicle, load_vehicle
 from rovlab.sim import metrics as mx
 from rovlab.sim.actuators import Actuators, make_actuators
 from rovlab.sim.components import build_pair
-from rovlab.sim.loop import Drive, Logs, draw, loop_for, new_logs, run_loop
+from rovlab.sim.loop import Drive, Logs, draw, explain_allocation, loop_for, new_logs, new_work, run_loop
 from rovlab.sim.plant import ObserverPlant, ProcessPlant
 from rovlab.sim.scenario import Scenario, scenario_from_dict
 
@@ -414,6 +414,7 @@ class Simulation:
         self.plant = fresh(prep.plant)
         self.estimator = fresh(prep.design.estimator.kernel)
         self.controller = fresh(prep.design.controller.kernel)
+        self.work = new_work(len(prep.channels), prep.nees_idx.shape[0], prep.actuators.rows.shape[0])
         self.k = 0
         self._marked = False
 
@@ -428,8 +429,9 @@ class Simulation:
                         self.controller.state.shape[0])
         loop = loop_for(self.plant, self.estimator, self.controller)
         t0 = time.perf_counter()
-        done = loop(self.k, self.k + n, prep.h, self.plant, prep.sensors, self.estimator, self.controller,
-                    prep.actuators, prep.nav_of, prep.nees_idx, drive, logs)
+        with explain_allocation((self.plant, self.estimator, self.controller)):
+            done = loop(self.k, self.k + n, prep.h, self.plant, prep.sensors, self.estimator, self.controller,
+                        prep.actuators, prep.nav_of, prep.nees_idx, drive, logs, self.work)
         if loop is run_loop and not self._marked:  # compiled or loaded from the disk cache
             self._marked = True
             _jit.mark_compiled(prep.loop_key, time.perf_counter() - t0)

@@ -16,8 +16,12 @@ picks the uncached copy for components defined outside rovlab, as rovlab.sim.loo
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
+import numpy as np
 from numba import njit
 
+from rovlab._jit import WITHOUT_NRT
 from rovlab.core.components import (
     controller_actuated,
     controller_step,
@@ -27,24 +31,38 @@ from rovlab.core.components import (
     plant_truth,
 )
 from rovlab.models.sensors import sample_sensors
-from rovlab.models.thrusters import bank_force
+from rovlab.models.thrusters import bank_force_into
 from rovlab.sim.actuators import actuate
 
 _DOF6 = (0, 1, 2, 5)  # X, Y, Z, N in the 6-DOF wrench [X, Y, Z, K, M, N]
 
 
-@njit(cache=True)
-def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, rep, nav, tau, tau_cmd, tau_real, pwm,
-                 x_out, P_out):
+class StepOut(NamedTuple):
+    """What :func:`control_step` fills (arrays the caller owns and reads after each step)."""
+
+    rep: np.ndarray  # (m, N_REP) the estimator's report per channel
+    nav: np.ndarray  # (N_TRUTH) the estimate in the TRUTH layout
+    tau: np.ndarray  # (4) demanded wrench [X, Y, Z, N]
+    tau_cmd: np.ndarray  # (4) the wrench the allocation achieved
+    tau_real: np.ndarray  # (4) what the PWM commands give on the model vehicle
+    pwm: np.ndarray  # (thrusters) PWM commands [us]
+    x: np.ndarray  # (n) corrected estimate
+    P: np.ndarray  # (n, n) its covariance
+
+
+@njit(cache=True, **WITHOUT_NRT)  # no reference counting, no allocation: as rovlab.sim.loop.run_loop
+def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, out):
     """One control step at time t [s] with the samples y (NaN where ``present`` is False).
 
-    Fills: rep (m x N_REP, the estimator's per-channel report), x_out / P_out (the corrected
-    estimate and covariance at t), nav (N_TRUTH, the estimate in the TRUTH layout the controller
-    reads), tau (4, demanded wrench), tau_cmd (4, the wrench the allocation achieved), tau_real
-    (4, what the PWM commands give on the model vehicle), pwm (thrusters, PWM [us]). With
-    ``engaged`` False the controller is not run and the demanded wrench is zero (neutral
-    thrusters); the estimator still corrects and predicts with the zero wrench.
+    Fills the arrays of ``out`` (:class:`StepOut`): the estimator's per-channel report, the
+    corrected estimate and covariance at t, the estimate in the TRUTH layout the controller
+    reads, the demanded wrench, the wrench the allocation achieved, what the PWM commands give on
+    the model vehicle and the PWM commands. With ``engaged`` False the controller is not run and
+    the demanded wrench is zero (neutral thrusters); the estimator still corrects and predicts
+    with the zero wrench.
     """
+    rep, nav, tau, tau_cmd, tau_real, pwm, x_out, P_out = (out.rep, out.nav, out.tau, out.tau_cmd, out.tau_real,
+                                                            out.pwm, out.x, out.P)
     estimator_correct(est, t, y, present, rep)
     n = est.x.shape[0]
     for i in range(n):
@@ -63,7 +81,7 @@ def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, rep, nav, 
         controller_actuated(ctrl, t, tau, tau_cmd)
 
 
-control_step_uncached = njit(cache=False)(getattr(control_step, "py_func", control_step))
+control_step_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(control_step, "py_func", control_step))
 
 
 def control_step_for(*components: object):
@@ -73,12 +91,13 @@ def control_step_for(*components: object):
     return control_step_uncached
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)
 def plant_push(plant, act, drive, row, pwm, tau_real):
     """Advance the plant one control period (noise of ``row`` of ``drive``) with the thrust the
     PWM commands ``pwm`` give; ``tau_real`` (4) receives that wrench [X, Y, Z, N] on the plant's
     true vehicle (act.B_true, act.rows)."""
-    f = bank_force(act.rows, act.grid_pwm, act.grid_force, pwm)
+    f = act.f_real
+    bank_force_into(act.rows, act.grid_pwm, act.grid_force, pwm, f)
     for a in range(4):
         r = _DOF6[a]
         acc = 0.0
@@ -88,7 +107,7 @@ def plant_push(plant, act, drive, row, pwm, tau_real):
     plant_advance(plant, drive, row, tau_real, tau_real)
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)
 def plant_sample(k, plant, sensors, drive, row, truth, y, present):
     """The plant's truth at t_k into ``truth`` (N_TRUTH) and the sensor samples of step k into y /
     present (noise and drop-outs of ``row`` of ``drive``). Returns False when the truth is no
@@ -101,5 +120,5 @@ def plant_sample(k, plant, sensors, drive, row, truth, y, present):
     return True
 
 
-plant_push_uncached = njit(cache=False)(getattr(plant_push, "py_func", plant_push))
-plant_sample_uncached = njit(cache=False)(getattr(plant_sample, "py_func", plant_sample))
+plant_push_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(plant_push, "py_func", plant_push))
+plant_sample_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(plant_sample, "py_func", plant_sample))

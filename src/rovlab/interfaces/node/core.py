@@ -382,8 +382,7 @@ class NodeCore:
                 self._pending_stamp[j] = math.nan
         t = k * self.h
         self._kernel(t, self.estimator, self.controller, self.actuators, self._nav_of, y, present, self.reference,
-                     self.engaged, self._rep, self._nav, self._tau, self._tau_cmd, self._tau_real, self._pwm,
-                     self._x, self._P)
+                     self.engaged, self._out)
         self.k = k + 1
         self.counters["steps"] += 1
         out = self._output(k, t)
@@ -415,7 +414,8 @@ class NodeCore:
 
     def _install(self, design: Design, keep: tuple[Any, Any, tuple[ChannelInfo, ...]] | None) -> None:
         """Make ``design`` the running one (compiling its step if this process has not yet)."""
-        from rovlab.sim.step import control_step_for
+        from rovlab.sim.loop import explain_allocation
+        from rovlab.sim.step import StepOut, control_step_for
 
         est = fresh(design.estimator.kernel)
         ctl = fresh(design.controller.kernel)
@@ -450,9 +450,10 @@ class NodeCore:
             # warm-up on copies, with no samples: the running state is not touched
             ew, cw = fresh(est), fresh(ctl)
             nav_of = np.array([TRUTH_INDEX[q] for q in design.estimator.nav], dtype=np.int64)
-            kernel(0.0, ew, cw, act, nav_of, np.full(m, np.nan), np.zeros(m, dtype=np.bool_), np.zeros(4), True,
-                   np.empty((m, N_REP)), np.zeros(N_TRUTH), np.zeros(4), np.zeros(4), np.zeros(4),
-                   np.empty(len(alloc.bank.names)), np.empty(n), np.empty((n, n)))
+            with explain_allocation((est, ctl)):
+                kernel(0.0, ew, cw, act, nav_of, np.full(m, np.nan), np.zeros(m, dtype=np.bool_), np.zeros(4), True,
+                       StepOut(np.empty((m, N_REP)), np.zeros(N_TRUTH), np.zeros(4), np.zeros(4), np.zeros(4),
+                               np.empty(len(alloc.bank.names)), np.empty(n), np.empty((n, n))))
             _COMPILED.add(key)
             self._log(f"rovlab node: control step ready ({time.perf_counter() - started:.1f} s)")
         self.design = design
@@ -482,6 +483,8 @@ class NodeCore:
         self._pwm = np.empty(len(alloc.bank.names))
         self._x = est.x.copy()
         self._P = est.P.copy()
+        # the same arrays, as the compiled step fills them
+        self._out = StepOut(self._rep, self._nav, self._tau, self._tau_cmd, self._tau_real, self._pwm, self._x, self._P)
 
 
 __all__ = ["TRUTH", "SAMPLE_RESULTS", "ChannelInfo", "NodeCore", "NodeOutput"]
