@@ -35,6 +35,10 @@ from rovlab.interfaces.node import ros_common as rc
 from rovlab.interfaces.node.core import NodeCore, NodeOutput
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+# the simulated vehicle makes up at most CATCH_UP steps at once after a stall; its truth and
+# set-point topics (what a recorder evaluates) keep more than one such burst for a slow reader
+CATCH_UP = 50
+RECORDED = QoSProfile(depth=4 * CATCH_UP, reliability=ReliabilityPolicy.RELIABLE)
 
 
 def _stamp(msg_stamp: Any, seconds: float) -> Any:
@@ -268,8 +272,8 @@ class SimNode:
         self.pub_p = node.create_publisher(FluidPressure, rc.TOPICS["pressure"], qos_profile_sensor_data)
         self.pub_m = node.create_publisher(PoseStamped, rc.TOPICS["mocap"], qos_profile_sensor_data)
         self.pub_i = node.create_publisher(Imu, rc.TOPICS["imu"], qos_profile_sensor_data)
-        self.pub_t = node.create_publisher(Odometry, rc.TOPICS["truth"], RELIABLE)
-        self.pub_s = node.create_publisher(PoseStamped, rc.TOPICS["setpoint"], RELIABLE) if setpoints else None
+        self.pub_t = node.create_publisher(Odometry, rc.TOPICS["truth"], RECORDED)
+        self.pub_s = node.create_publisher(PoseStamped, rc.TOPICS["setpoint"], RECORDED) if setpoints else None
         node.create_subscription(Float64MultiArray, rc.TOPICS["pwm"], self._on_pwm, RELIABLE)
         self.last_ref: tuple[float, float] | None = None
         self.last_ref_time = -1e9
@@ -300,12 +304,12 @@ class SimNode:
         if self.t0 is None:
             self.t0 = now
         # the simulated time follows the clock: steps missed while the process was held up are
-        # made up at once (stamped with their own times), at most 50 at a time
+        # made up at once (stamped with their own times), at most CATCH_UP at a time
         due = int((now - self.t0) / self.sim.h + 1e-9) + 1 - self.sim.k
-        for _ in range(min(max(due, 0), 50)):
+        for _ in range(min(max(due, 0), CATCH_UP)):
             s = self.sim.step()
             self._publish_step(s, self.t0 + s.t)
-        if due > 50:
+        if due > CATCH_UP:
             self.t0 = now - (self.sim.k - 1) * self.sim.h
 
     def _publish_step(self, s: Any, now: float) -> None:
