@@ -114,13 +114,39 @@ def folder() -> Path | None:
 
 
 def _module_file(where: Path, name: str) -> Path | None:
+    return module_file(where, f"{MODULE}_{name}")
+
+
+def module_file(where: Path, module: str) -> Path | None:
+    """The built extension module ``module`` in ``where``, if it is there."""
     import importlib.machinery
 
     for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        path = where / f"{MODULE}_{name}{suffix}"
+        path = where / f"{module}{suffix}"
         if path.is_file():
             return path
     return None
+
+
+def load(path: Path, module: str, name: str) -> Callable[..., Any] | None:
+    """The function ``name`` of the built module at ``path``; None when the module cannot be
+    loaded (damaged, or built by another numba or Python: then the JIT kernel runs)."""
+    import importlib.util
+
+    fn = None
+    try:
+        spec = importlib.util.spec_from_file_location(module, path)
+        if spec is not None and spec.loader is not None:
+            mod = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(mod)
+            fn = getattr(mod, name, None)
+    except (ImportError, OSError):
+        fn = None
+    try:
+        os.utime(path.parent)  # its last use (rovlab.prune_caches)
+    except OSError:
+        pass
+    return fn
 
 
 def built() -> bool:
@@ -151,24 +177,9 @@ def kernel(name: str) -> Callable[..., Any] | None:
     None when it is not built yet, disabled (ROVLAB_AOT=0) or unloadable: then the JIT kernel runs."""
     if name in _loaded:
         return _loaded[name]
-    fn = None
     where = folder() if enabled() else None
     path = _module_file(where, name) if where is not None else None
-    if path is not None:
-        import importlib.util
-
-        try:
-            spec = importlib.util.spec_from_file_location(f"{MODULE}_{name}", path)
-            if spec is not None and spec.loader is not None:
-                mod = importlib.util.module_from_spec(spec)
-                spec.loader.exec_module(mod)
-                fn = getattr(mod, name, None)
-        except (ImportError, OSError):
-            fn = None  # damaged or foreign: the JIT kernel runs
-        try:
-            os.utime(path.parent)  # its last use (rovlab.prune_caches)
-        except OSError:
-            pass
+    fn = load(path, f"{MODULE}_{name}", name) if path is not None else None
     _loaded[name] = fn
     return fn
 
@@ -177,13 +188,46 @@ def build(where: Path | None = None) -> Path:
     """Compile :data:`KERNELS` into ``where`` (default :func:`folder`) for this CPU; returns the
     folder. Needs a C compiler (numba.pycc builds with distutils' toolchain)."""
     import importlib
-    import shutil
-    import tempfile
-    import warnings
 
     where = where or folder()
     if where is None:
         raise RuntimeError("rovlab's sources cannot be read: no cache folder to build into")
+    for name, (mod_name, func, _, _) in KERNELS.items():
+        fn = getattr(importlib.import_module(mod_name), func)
+        compile_module(where, f"{MODULE}_{name}", name, getattr(fn, "py_func", fn), _signature(name))
+    return where
+
+
+def compile_module(where: Path, module: str, name: str, func: Callable[..., Any], signature: Any) -> Path:
+    """Compile the plain function ``func`` for ``signature`` (numba types) into the extension
+    module ``where/module`` exporting it as ``name``, for this CPU; returns the module's path. The
+    functions ``func`` calls are compiled as the JIT compiles them (their own flags; from numba's
+    disk cache when they are there, which makes a build take seconds instead of minutes)."""
+    import shutil
+    import tempfile
+
+    CC, host_cpu = _pycc()
+    where.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=".build-", dir=where) as tmp:
+        cc = CC(module)
+        cc.output_dir = tmp
+        cc.target_cpu = host_cpu
+        cc.verbose = False
+        cc.export(name, signature)(func)
+        cc.compile()
+        made = module_file(Path(tmp), module)
+        if made is None:
+            raise RuntimeError(f"numba.pycc produced no {module} extension in {tmp}")
+        partial = where / f".{made.name}.tmp"
+        shutil.move(str(made), str(partial))
+        os.replace(partial, where / made.name)
+        return where / made.name
+
+
+def _pycc() -> tuple[Any, str]:
+    """numba.pycc's CC, set up (once per process) to build as the JIT builds, and this CPU's name."""
+    import warnings
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # numba.pycc is pending deprecation (no replacement yet)
         from llvmlite import binding
@@ -192,40 +236,24 @@ def build(where: Path | None = None) -> Path:
         from numba.pycc import CC
         from numba.pycc import compiler as pycc_compiler
 
-    # Built as the JIT builds them (this process only builds): releasing the GIL as their nogil=True
-    # asks (pycc starts from default flags: the log's reader and writer threads would wait), and
-    # for this CPU's name *and* features (pycc derives features from the name alone, which a
-    # virtual machine that masks some would not run).
-    class _Flags(pycc_compiler.Flags):
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            self.release_gil = True  # type: ignore[assignment]
+    if not getattr(pycc_compiler, "_rovlab_ready", False):
+        # Built as the JIT builds them (this process only builds): releasing the GIL as the
+        # kernels' nogil=True asks (pycc starts from default flags: the log's reader and writer
+        # threads would wait), and for this CPU's name *and* features (pycc derives features from
+        # the name alone, which a virtual machine that masks some would not run).
+        class _Flags(pycc_compiler.Flags):
+            def __init__(self, *args: Any, **kwargs: Any) -> None:
+                super().__init__(*args, **kwargs)
+                self.release_gil = True  # type: ignore[assignment]
 
-    pycc_compiler.Flags = _Flags  # type: ignore[misc]
-    codegen.AOTCPUCodegen._customize_tm_features = lambda self: self._get_host_cpu_features()  # type: ignore[method-assign]
-
-    # the JIT refreshes the typing and target registries before compiling; numba.pycc does not,
-    # and without them some kernels fail to type (an inlined kernel's integer codes)
-    cpu_target.typing_context.refresh()
-    cpu_target.target_context.refresh()
-
-    where.mkdir(parents=True, exist_ok=True)
-    for name, (mod_name, func, _, _) in KERNELS.items():
-        with tempfile.TemporaryDirectory(prefix=".build-", dir=where) as tmp:
-            cc = CC(f"{MODULE}_{name}")
-            cc.output_dir = tmp
-            cc.target_cpu = binding.get_host_cpu_name()
-            cc.verbose = False
-            fn = getattr(importlib.import_module(mod_name), func)
-            cc.export(name, _signature(name))(getattr(fn, "py_func", fn))
-            cc.compile()
-            made = _module_file(Path(tmp), name)
-            if made is None:
-                raise RuntimeError(f"numba.pycc produced no {MODULE}_{name} extension in {tmp}")
-            partial = where / f".{made.name}.tmp"
-            shutil.move(str(made), str(partial))
-            os.replace(partial, where / made.name)
-    return where
+        pycc_compiler.Flags = _Flags  # type: ignore[misc]
+        codegen.AOTCPUCodegen._customize_tm_features = lambda self: self._get_host_cpu_features()  # type: ignore[method-assign]
+        # the JIT refreshes the typing and target registries before compiling; numba.pycc does
+        # not, and without them some kernels fail to type (an inlined kernel's integer codes)
+        cpu_target.typing_context.refresh()
+        cpu_target.target_context.refresh()
+        pycc_compiler._rovlab_ready = True  # type: ignore[attr-defined]
+    return CC, binding.get_host_cpu_name()
 
 
 def build_in_background() -> str | None:

@@ -53,7 +53,7 @@ class LazyKernels:
     def module_getattr(self, module_name: str) -> Callable[[str], Any]:
         def __getattr__(name: str) -> Any:
             if name in self.names:
-                return self.compiled()[name]
+                return self.plain(name) if _without_numba else self.compiled()[name]
             raise AttributeError(f"module {module_name!r} has no attribute {name!r}")
 
         return __getattr__
@@ -69,9 +69,9 @@ _without_numba: list[bool] = []  # set once by run_without_numba() in a process 
 
 
 def njit(*args: Any, **options: Any) -> Any:
-    """``numba.njit`` for the kernels that ``rovlab filter`` needs (rovlab.core.angles,
-    estimation.fusion, estimation.kalman, io.csvtext): in a process that called
-    :func:`run_without_numba` first, the plain function instead, and numba is never imported."""
+    """``numba.njit`` for rovlab's kernels: in a process that called :func:`run_without_numba`
+    first (one that runs only kernels built ahead of time: ``rovlab filter``, a simulation whose
+    loop is built, rovlab.sim.prebuilt), the plain function instead, and numba is never imported."""
     if _without_numba:
         if len(args) == 1 and callable(args[0]) and not options:
             return args[0]
@@ -81,16 +81,65 @@ def njit(*args: Any, **options: Any) -> Any:
     return numba.njit(*args, **options)
 
 
-_NUMBA_FREE_IF = ("rovlab.core.angles", "rovlab.estimation.fusion", "rovlab.estimation.kalman", "rovlab.io.csvtext")
+def without_numba() -> bool:
+    """Whether this process runs without numba (:func:`run_without_numba` took effect)."""
+    return bool(_without_numba)
+
+
+def plain(fn: Any) -> Any:
+    """A kernel (a numba dispatcher or a plain function) as plain Python whose calls to other
+    kernels are plain too, all the way down: for set-up code that calls a kernel once from
+    Python, which would otherwise start numba's JIT (~0.4 s of registries) in a process that
+    runs only code built ahead of time (rovlab.sim.prebuilt). Copies are made once per kernel."""
+    f = getattr(fn, "py_func", fn)
+    copy = _plain.get(f)
+    if copy is None:
+        namespace = dict(f.__globals__)
+        copy = types.FunctionType(f.__code__, namespace, f.__name__, f.__defaults__, f.__closure__)
+        _plain[f] = copy
+        for k, v in namespace.items():  # after the memo: kernels that call each other
+            if hasattr(v, "py_func") and callable(v):
+                namespace[k] = plain(v)
+            elif isinstance(v, types.ModuleType) and v.__name__.startswith("rovlab."):
+                namespace[k] = _PlainModule(v)  # kin.jacobian_into(...) and the like
+    return copy
+
+
+class _PlainModule:
+    """A rovlab module seen through :func:`plain`: its kernels as plain Python (a module of
+    LazyKernels gives its plain functions without creating numba's dispatchers)."""
+
+    def __init__(self, module: types.ModuleType) -> None:
+        self._module = module
+
+    def __getattr__(self, name: str) -> Any:
+        lazy = getattr(self._module, "_kernels", None)
+        if isinstance(lazy, LazyKernels) and name in lazy.names:
+            return lazy.plain(name)
+        value = getattr(self._module, name)
+        return plain(value) if hasattr(value, "py_func") and callable(value) else value
+
+
+_plain: dict[Any, Any] = {}
+
+
+# the modules whose kernels take njit from here (or register numba overloads): run_without_numba
+# must come before any of them is imported
+_NUMBA_FREE_IF = ("rovlab.core.angles", "rovlab.estimation.fusion", "rovlab.estimation.kalman", "rovlab.io.csvtext",
+                  "rovlab.core.components", "rovlab.models.kinetics", "rovlab.models.sensors",
+                  "rovlab.estimation.kf", "rovlab.estimation.ekf", "rovlab.control.lqg", "rovlab.control.dp",
+                  "rovlab.control.mrac", "rovlab.sim.actuators", "rovlab.sim.plant", "rovlab.sim.loop",
+                  "rovlab.sim.step")
 
 
 def run_without_numba() -> bool:
     """Make the kernels of the modules above plain Python functions in this process, so that a
-    command whose compiled work is done by kernels built ahead of time (rovlab._aot) does not
-    pay numba's import (~0.25 s). Only possible before those modules are imported and while
-    numba is not; returns whether it took effect. Afterwards nothing in the process may compile
-    code that calls them (a kernel call that cannot go to a built module runs interpreted:
-    the same numbers, slowly)."""
+    command whose compiled work is done by kernels built ahead of time (rovlab._aot,
+    rovlab.sim.prebuilt) does not pay numba's import (~0.2 s). Only possible before those
+    modules are imported and while numba is not; returns whether it took effect. Afterwards
+    nothing in the process may compile code that calls them (a kernel call that cannot go to a
+    built module runs interpreted: the same numbers, slowly; rovlab simulate restarts itself
+    with ROVLAB_AOT=0 rather than do that, rovlab.interfaces.cli_sim)."""
     import sys
 
     if _without_numba:

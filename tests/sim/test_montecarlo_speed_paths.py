@@ -104,3 +104,35 @@ def test_no_figures_renders_no_nees_plot(tmp_path):
     assert sorted(p.name for p in (out / "monte_carlo").iterdir()) == ["metrics.json"]
     mc = json.loads((out / "monte_carlo" / "metrics.json").read_text())["monte_carlo"]
     assert mc["runs"] == 3 and mc["seeds"] == [1, 2, 3]
+
+
+def test_a_design_is_stored_once_and_loaded_as_it_was_made(tmp_path, monkeypatch):
+    """A process whose design is on disk neither designs nor imports scipy.linalg
+    (runner.stored_design); the stored design runs exactly like the one just made."""
+    from rovlab.params.validate import ConfigError
+    from rovlab.sim import runner
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    data, file = load_scenario_data("step-process-model")
+    made = run_prepared(prepare(data, file=file, seed=2))
+    stored = list((tmp_path / "rovlab" / "design").glob("sim-*.pickle"))
+    assert len(stored) == 1
+
+    def no_design(*args, **kw):
+        raise AssertionError("designed again instead of loading the stored design")
+
+    monkeypatch.setattr(runner, "make_design", no_design)
+    _same_result(run_prepared(prepare(data, file=file, seed=2)), made)
+    # a damaged file designs afresh (and stores it again)
+    stored[0].write_bytes(b"not a pickle")
+    monkeypatch.undo()
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    _same_result(run_prepared(prepare(data, file=file, seed=2)), made)
+    assert stored[0].read_bytes() != b"not a pickle"
+    # a refused design raises every time and is never stored
+    prep = prepare(data, file=file, seed=2)
+    for _ in range(2):
+        with pytest.raises(ConfigError):
+            runner.stored_design(prep.vehicle, prep.config, plant="observer", plant_step=0.01, estimator="ekf",
+                                 controller="dp", file=file)
+    assert len(list((tmp_path / "rovlab" / "design").glob("sim-*.pickle"))) == 1

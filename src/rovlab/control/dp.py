@@ -45,8 +45,8 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import njit
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import ControllerSpec, register_controller
 from rovlab.models import kinetics as kin

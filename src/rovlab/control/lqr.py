@@ -28,7 +28,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solve_discrete_are
 
 from rovlab.core.weights import bryson_diagonal
 from rovlab.models.discretise import zoh
@@ -58,6 +57,8 @@ def dlqr(Phi: np.ndarray, Delta: np.ndarray, Q: np.ndarray, R: np.ndarray
     R = np.asarray(R, dtype=float)
     if np.any(np.linalg.eigvalsh(0.5 * (R + R.T)) <= 0):
         raise ValueError("the input weight R must be positive definite")
+    from scipy.linalg import solve_discrete_are  # here: a run whose design is stored never imports it
+
     S = solve_discrete_are(Phi, Delta, Q, R)
     K = np.linalg.solve(R + Delta.T @ S @ Delta, Delta.T @ S @ Phi)
     return K, S, np.linalg.eigvals(Phi - Delta @ K)

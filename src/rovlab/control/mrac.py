@@ -59,8 +59,8 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import njit
 from rovlab.control.lqg import lqg_tau
 from rovlab.control.lqr import LQRDesign, design_lqr_from_config
 from rovlab.core.components import ControllerSpec, register_controller

@@ -47,9 +47,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba.core import types
-from numba.core.errors import TypingError
-from numba.extending import overload
+
+from rovlab import _jit
 
 # Layout of the truth vector and of the estimate handed to controllers (world position and
 # heading, body velocities, and the force/moment biases per DOF).
@@ -194,50 +193,62 @@ def controller_actuated(ctrl, t, tau_demanded, tau_achieved):
     return _bound("controller_actuated", ctrl)(ctrl, t, tau_demanded, tau_achieved)
 
 
-def _lookup(slot: str, comp_type) -> Callable:
-    cls = getattr(comp_type, "instance_class", None)
-    if isinstance(comp_type, types.BaseNamedTuple) and cls in _REGISTRY[slot]:
-        return _REGISTRY[slot][cls]
-    raise TypingError(f"{slot}: {cls.__name__ if cls else comp_type} is not registered "
-                      f"(rovlab.core.components.register_*)")
+def _install_overloads() -> None:
+    """Make the slot functions compile to the registered kernels (numba ``overload``). Not done
+    in a process that runs without numba (rovlab._jit.run_without_numba: the loop built ahead of
+    time), where the slots are only ever called from Python."""
+    from numba.core import types
+    from numba.core.errors import TypingError
+    from numba.extending import overload
+
+    def _lookup(slot: str, comp_type) -> Callable:
+        cls = getattr(comp_type, "instance_class", None)
+        if isinstance(comp_type, types.BaseNamedTuple) and cls in _REGISTRY[slot]:
+            return _REGISTRY[slot][cls]
+        raise TypingError(f"{slot}: {cls.__name__ if cls else comp_type} is not registered "
+                          f"(rovlab.core.components.register_*)")
 
 
-@overload(plant_truth, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
-def _ol_plant_truth(plant, truth):
-    fn = _lookup("plant_truth", plant)
-    return lambda plant, truth: fn(plant, truth)
+    @overload(plant_truth, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
+    def _ol_plant_truth(plant, truth):
+        fn = _lookup("plant_truth", plant)
+        return lambda plant, truth: fn(plant, truth)
 
 
-@overload(plant_advance, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
-def _ol_plant_advance(plant, drive, row, tau_cmd, tau_real):
-    fn = _lookup("plant_advance", plant)
-    return lambda plant, drive, row, tau_cmd, tau_real: fn(plant, drive, row, tau_cmd, tau_real)
+    @overload(plant_advance, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
+    def _ol_plant_advance(plant, drive, row, tau_cmd, tau_real):
+        fn = _lookup("plant_advance", plant)
+        return lambda plant, drive, row, tau_cmd, tau_real: fn(plant, drive, row, tau_cmd, tau_real)
 
 
-@overload(estimator_correct, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
-def _ol_estimator_correct(est, t, y, present, rep):
-    fn = _lookup("estimator_correct", est)
-    return lambda est, t, y, present, rep: fn(est, t, y, present, rep)
+    @overload(estimator_correct, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
+    def _ol_estimator_correct(est, t, y, present, rep):
+        fn = _lookup("estimator_correct", est)
+        return lambda est, t, y, present, rep: fn(est, t, y, present, rep)
 
 
-@overload(estimator_predict, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
-def _ol_estimator_predict(est, t, tau):
-    fn = _lookup("estimator_predict", est)
-    return lambda est, t, tau: fn(est, t, tau)
+    @overload(estimator_predict, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
+    def _ol_estimator_predict(est, t, tau):
+        fn = _lookup("estimator_predict", est)
+        return lambda est, t, tau: fn(est, t, tau)
 
 
-@overload(controller_step, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
-def _ol_controller_step(ctrl, t, nav, ref, tau):
-    fn = _lookup("controller_step", ctrl)
-    return lambda ctrl, t, nav, ref, tau: fn(ctrl, t, nav, ref, tau)
+    @overload(controller_step, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
+    def _ol_controller_step(ctrl, t, nav, ref, tau):
+        fn = _lookup("controller_step", ctrl)
+        return lambda ctrl, t, nav, ref, tau: fn(ctrl, t, nav, ref, tau)
 
 
-@overload(controller_actuated, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
-def _ol_controller_actuated(ctrl, t, tau_demanded, tau_achieved):
-    fn = _lookup("controller_actuated", ctrl)
-    if fn is _no_actuated:
-        return lambda ctrl, t, tau_demanded, tau_achieved: None
-    return lambda ctrl, t, tau_demanded, tau_achieved: fn(ctrl, t, tau_demanded, tau_achieved)
+    @overload(controller_actuated, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
+    def _ol_controller_actuated(ctrl, t, tau_demanded, tau_achieved):
+        fn = _lookup("controller_actuated", ctrl)
+        if fn is _no_actuated:
+            return lambda ctrl, t, tau_demanded, tau_achieved: None
+        return lambda ctrl, t, tau_demanded, tau_achieved: fn(ctrl, t, tau_demanded, tau_achieved)
+
+
+if not _jit.without_numba():
+    _install_overloads()
 
 
 # --------------------------------------------------------------------------------------------

@@ -40,10 +40,8 @@ from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
-from scipy.linalg import expm
 
-from rovlab._jit import WITH_NRT
+from rovlab._jit import WITH_NRT, njit, plain
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import EstimatorSpec, register_estimator
 from rovlab.estimation.fusion import new_channel_state
@@ -244,7 +242,7 @@ register_estimator(EKF, state=("x", "P", "ch"), correct=_correct, predict=_predi
 def continuous_model(p: np.ndarray, inv_T: np.ndarray, x: np.ndarray, tau: np.ndarray | None = None) -> np.ndarray:
     """The 12 x 12 Jacobian at x (for design and tests)."""
     A = np.empty((N_X, N_X))
-    jacobian12(p, inv_T, np.asarray(x, dtype=float), np.zeros(4) if tau is None else np.asarray(tau, dtype=float),
+    plain(jacobian12)(p, inv_T, np.asarray(x, dtype=float), np.zeros(4) if tau is None else np.asarray(tau, dtype=float),
                A, np.empty((8, 8)), np.empty(4))
     return A
 
@@ -259,6 +257,8 @@ def discrete_model(p: np.ndarray, inv_T: np.ndarray, W: np.ndarray, x: np.ndarra
     EWE[4:8, 4:8] = (Bf[4:8] * W[:4]) @ Bf[4:8].T
     EWE[8:, 8:] = np.diag(W[4:])
     F = np.block([[-A * h, EWE * h], [np.zeros((n, n)), A.T * h]])
+    from scipy.linalg import expm
+
     G = expm(F)
     Phi = G[n:, n:].T
     return Phi, Phi @ G[:n, n:]
@@ -327,7 +327,8 @@ def build(vehicle: Vehicle, config: DesignConfig) -> EstimatorSpec:
     channels = [replace(c, startup_s=auto) if math.isnan(c.startup_s) else c for c in channels]
     cfg = channel_config(channels, H)
     kernel = EKF(p, inv_T, W, float(h), int(ec.substeps), H, cfg, np.array([s == "psi" for s in EKF_STATES]),
-                 np.array(ec.initial_state, dtype=float), P0.copy(), new_channel_state(m), np.empty(work_size(N_X, m)),
+                 np.array(ec.initial_state, dtype=float), P0.copy(), plain(new_channel_state)(m),
+                 np.empty(plain(work_size)(N_X, m)),
                  np.empty((N_X, N_X)), np.empty((8, 8)), np.empty((2 * N_X, 2 * N_X)), np.empty((4, N_X)),
                  np.empty(N_X), np.empty(4))
     model = EKFModel(h=h, p=p, inv_T=inv_T, W=W, channels=tuple(channels), H=H, R=R, x0=kernel.x.copy(), P0=P0,

@@ -13,8 +13,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import njit, plain
 from rovlab.core.components import EstimatorSpec, register_estimator
 from rovlab.estimation.fusion import new_channel_state
 from rovlab.estimation.kalman import correct_arrays, pack_model, predict_arrays, unpack_model, work_size
@@ -61,11 +61,13 @@ register_estimator(KalmanFilter, state=("x", "P", "ch"), correct=_correct, predi
 def from_model(fm: FilterModel) -> KalmanFilter:
     """The component of a designed filter model, at its initial belief."""
     packed = pack_model(fm.Phi, fm.Delta, fm.Q, fm.H, fm.channel_config(), fm.wrap_states())
-    Phi, Delta, Q, H, cfg, wrap, sp = (np.array(a, dtype=float, order="C") for a in unpack_model(packed))
+    # plain functions: a compiled call here would start numba's JIT in a process that runs the
+    # loop built ahead of time (rovlab.sim.prebuilt)
+    Phi, Delta, Q, H, cfg, wrap, sp = (np.array(a, dtype=float, order="C") for a in plain(unpack_model)(packed))
     n, m = fm.Phi.shape[0], len(fm.channels)
     return KalmanFilter(Phi, Delta, Q, H, cfg, wrap, sp, np.array(_INPUTS, dtype=np.int64),
-                        fm.x0.astype(float).copy(), fm.P0.astype(float).copy(), new_channel_state(m),
-                        np.zeros(len(_INPUTS)), np.empty(work_size(n, m)))
+                        fm.x0.astype(float).copy(), fm.P0.astype(float).copy(), plain(new_channel_state)(m),
+                        np.zeros(len(_INPUTS)), np.empty(plain(work_size)(n, m)))
 
 
 def build(vehicle: Vehicle, config: DesignConfig) -> EstimatorSpec:

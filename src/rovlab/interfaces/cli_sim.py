@@ -71,15 +71,33 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     name = str(data.get("name") or Path(file).stem)
     out = Path(args.out or Path("out") / name)
     first_run(data, file, args.scenario, args.runs, args.workers)
-    result, metrics, notes = _run_and_write(data, file, args.seed, out, figures=not args.no_figures)
-    sc = result.scenario
-    print(f"{sc.name} (seed {sc.seed}, {sc.plant} plant, {sc.duration_s:g} s) -> {out}/")
+    from rovlab.sim.prebuilt import NotBuilt
+
+    try:
+        return _simulate(args, data, file, out)
+    except NotBuilt as exc:  # numba-free, and the loop built ahead of time does not fit: start again with the JIT
+        print(f"note: {exc}; starting again with the JIT loop (ROVLAB_AOT=0)", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], {**os.environ, "ROVLAB_AOT": "0"})
+
+
+def _simulate(args: argparse.Namespace, data, file, out: Path) -> int:
+    figures = not args.no_figures
     interrupted = False
-    if args.runs > 1:
+    if args.runs > 1:  # the single run's files are written while the Monte Carlo workers run
+        result, metrics = _run(data, file, args.seed)
+        notes: list[str] = []
+        sc = result.scenario
         summary = _monte_carlo(data, file, sc.seed, args.runs, args.workers, args.backend, args.scheduler, out,
-                               result, metrics, notes, figures=not args.no_figures)
+                               result, metrics, notes, figures=figures,
+                               meanwhile=lambda: _write(out, result, metrics, notes, figures=figures))
+        print(f"{sc.name} (seed {sc.seed}, {sc.plant} plant, {sc.duration_s:g} s) -> {out}/")
         _print_mc(summary)
         interrupted = bool(summary.get("interrupted"))
+    else:
+        result, metrics, notes = _run_and_write(data, file, args.seed, out, figures=figures)
+        sc = result.scenario
+        print(f"{sc.name} (seed {sc.seed}, {sc.plant} plant, {sc.duration_s:g} s) -> {out}/")
     _print_summary([(sc.name, metrics)])
     for n in notes:
         print(f"note: {n}", file=sys.stderr)
@@ -159,14 +177,18 @@ def first_run(data, file, ref: str, runs: int, workers: int | None, design: str 
     interpreter keeps up with; the loop compiles in the background for the next runs) or say that
     it compiles now and for how long (rovlab._jit; ROVLAB_JIT overrides)."""
     from rovlab import _jit
+    from rovlab.sim import prebuilt
 
     mode = checked_jit_mode()
     loop = loop_of(data, file, design=design)
     if loop is None or _jit.interpreting():
         return  # a bad scenario (reported by the run) or NUMBA_DISABLE_JIT set by the user
     key, what, rows = loop
+    if mode != "interpret" and not live and prebuilt.built_for(key) and _jit.run_without_numba():
+        return  # the loop built ahead of time runs, and numba is not even imported (rovlab.sim.prebuilt)
     work = 0 if live else int(runs * rows)
-    tier = first_run_tier(mode, _jit.is_compiled(key), work, min(runs, workers or os.cpu_count() or 1))
+    tier = first_run_tier(mode, _jit.is_compiled(key) or prebuilt.built_for(key), work,
+                          min(runs, workers or os.cpu_count() or 1))
     if tier == "cached":
         return
     if tier == "interpret" and _jit.interpret_this_process():
@@ -182,8 +204,15 @@ def first_run(data, file, ref: str, runs: int, workers: int | None, design: str 
 
 
 def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
+    result, metrics = _run(data, file, seed)
+    notes: list[str] = []
+    _write(out, result, metrics, notes, figures=figures)
+    return result, metrics, notes
+
+
+def _run(data, file, seed):
+    """One run of the scenario and its metrics."""
     from rovlab.interfaces.cli import UserError
-    from rovlab.sim.output import write_run
     from rovlab.sim.runner import PlantDiverged, prepare, run_prepared, summarise
 
     prep = prepare(data, file=file, seed=seed)
@@ -191,25 +220,30 @@ def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
         result = run_prepared(prep)
     except PlantDiverged as exc:
         raise UserError(f"{file}: {exc}") from None
-    metrics = summarise(result)
-    notes: list[str] = []
+    return result, summarise(result)
+
+
+def _write(out: Path, result, metrics, notes: list[str], *, figures: bool = True) -> None:
+    """The run's files (what cannot be written goes into ``notes``)."""
+    from rovlab.interfaces.cli import UserError
+    from rovlab.sim.output import write_run
+
     try:
         write_run(out, result, metrics, figures=figures, report=figures, notes=notes)
     except OSError as exc:
         raise UserError(f"cannot write the results to {out}/: {exc.strerror or exc} "
                         f"({exc.filename or out}); choose another --out") from None
-    return result, metrics, notes
 
 
 def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path, result, metrics, notes, *,
-                 figures: bool = True):
+                 figures: bool = True, meanwhile=None):
     from rovlab.sim.montecarlo import Progress, run_many, summarise_runs
     from rovlab.sim.output import write_json, write_monte_carlo
 
     seeds = list(range(seed, seed + runs))
     t0 = time.perf_counter()
     done = run_many(data, file, seeds, workers=workers, backend=backend, scheduler=scheduler,
-                    progress=Progress(f"Monte Carlo {result.scenario.name}"))
+                    progress=Progress(f"Monte Carlo {result.scenario.name}"), meanwhile=meanwhile)
     wall = time.perf_counter() - t0
     summary = summarise_runs(done)
     summary["wall_time_s"] = wall

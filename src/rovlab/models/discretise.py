@@ -24,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
 
 
 def _square(name: str, M: np.ndarray) -> np.ndarray:
@@ -52,6 +51,8 @@ def zoh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]
     M = np.zeros((n + m, n + m))
     M[:n, :n] = A
     M[:n, n:] = B
+    from scipy.linalg import expm  # here: a run whose design is stored never imports scipy.linalg
+
     G = expm(M * h)
     return G[:n, :n].copy(), G[:n, n:].copy()
 
@@ -74,6 +75,8 @@ def van_loan(A: np.ndarray, E: np.ndarray, W: np.ndarray, h: float) -> tuple[np.
     F[:n, :n] = -A * h
     F[:n, n:] = E @ W @ E.T * h
     F[n:, n:] = A.T * h
+    from scipy.linalg import expm
+
     G = expm(F)
     Phi = G[n:, n:].T.copy()
     Q = Phi @ G[:n, n:]

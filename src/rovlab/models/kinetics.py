@@ -27,8 +27,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import njit
 from rovlab.core.angles import cos_sin_small
 from rovlab.params.vehicle import Vehicle
 

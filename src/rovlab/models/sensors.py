@@ -12,8 +12,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import njit
 from rovlab.core.angles import wrap_angle
 
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import njit
 from rovlab.allocation.solvers import Allocator, allocate_into
 from rovlab.models.thrusters import ThrusterBank, bank_force_into, bank_pwm_into
 

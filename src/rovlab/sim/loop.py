@@ -30,9 +30,8 @@ import re
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
-from rovlab._jit import WITHOUT_NRT
+from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
     N_TRUTH,

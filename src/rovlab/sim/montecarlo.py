@@ -50,7 +50,9 @@ class Campaign:
         from rovlab.sim.runner import run_prepared, summarise
 
         result = run_prepared(self.prepared(seed))
-        return {"seed": seed, "metrics": summarise(result), "nees": result.nees, "nis": result.nis}
+        metrics = summarise(result)
+        # flattened here, in the worker, rather than by summarise_runs in the parent after the runs
+        return {"seed": seed, "metrics": metrics, "nees": result.nees, "nis": result.nis, "flat": _flatten(metrics)}
 
 
 def _chunk(data: Mapping[str, Any], file: str, seeds: Sequence[int]) -> list[dict[str, Any]]:
@@ -77,17 +79,24 @@ def _worker_chunk(seeds: Sequence[int]) -> list[dict[str, Any]]:
 
 def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, workers: int | None = None,
              backend: str = "processes", scheduler: str | None = None,
-             progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
-    """Run the scenario once per seed; results in seed order."""
+             progress: Callable[[int, int], None] | None = None,
+             meanwhile: Callable[[], None] | None = None) -> list[dict[str, Any]]:
+    """Run the scenario once per seed; results in seed order. ``meanwhile`` is the caller's own
+    work (e.g. writing the files of its single run), done in this process while the workers run
+    (before the runs when there are no workers); an error in it stops the runs and is raised."""
     seeds = list(seeds)
     workers = max(1, workers or os.cpu_count() or 1)
     if backend == "dask":
-        return _run_dask(data, file, seeds, scheduler, progress)
+        return _run_dask(data, file, seeds, scheduler, progress, meanwhile)
     if backend != "processes":
         raise ValueError(f"unknown Monte Carlo backend {backend!r}; expected 'processes' or 'dask'")
     n = len(seeds)
-    if n == 0:
-        return []
+    if n == 0 or workers == 1 or n == 1:
+        if meanwhile is not None:
+            meanwhile()
+        if n == 0:
+            return []
+        meanwhile = None
     campaign = Campaign(data, file, seeds[0])  # the design, once; forked workers inherit it
     out: list[dict[str, Any]] = []
     if workers == 1 or n == 1:
@@ -115,6 +124,14 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
         if progress:
             progress(done, n)
         futures = [pool.submit(_worker_chunk, c) for c in chunks]
+        if meanwhile is not None:  # the workers are forked and busy: the caller's own work now
+            try:
+                meanwhile()
+            except BaseException:
+                for fut in futures:
+                    fut.cancel()
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
         for fut in as_completed(futures):
             for r in fut.result():
                 results[r["seed"]] = r
@@ -154,7 +171,7 @@ def dask_available() -> bool:
     return True
 
 
-def _run_dask(data, file, seeds, scheduler, progress):
+def _run_dask(data, file, seeds, scheduler, progress, meanwhile=None):
     """Runs as Dask tasks, in chunks like the process pool: on the scheduler at ``scheduler``
     (e.g. tcp://host:8786) or on a local cluster of one single-threaded worker process per core."""
     if not dask_available():
@@ -175,6 +192,12 @@ def _run_dask(data, file, seeds, scheduler, progress):
         size = max(1, min(50, n // (workers * 4) or 1))
         chunks = [seeds[i:i + size] for i in range(0, n, size)]
         futures = [client.submit(_chunk, data, file, c, pure=False) for c in chunks]
+        if meanwhile is not None:
+            try:
+                meanwhile()
+            except BaseException:
+                client.cancel(futures)
+                raise
         try:
             for fut in as_completed(futures):
                 for r in fut.result():
@@ -193,7 +216,7 @@ def _run_dask(data, file, seeds, scheduler, progress):
 
 def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """Spread of every numeric metric over the runs, and the Monte Carlo NEES/NIS consistency."""
-    flat = [_flatten(r["metrics"]) for r in runs]
+    flat = [r["flat"] if "flat" in r else _flatten(r["metrics"]) for r in runs]
     keys = sorted({k for f in flat for k in f})
     stats: dict[str, Any] = {}
     for k in keys:
@@ -227,10 +250,16 @@ def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 
 
 def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
+    """The numbers of a run's metrics by dotted key ("rms_error.z", "steps[0].overshoot")."""
     out: dict[str, float] = {}
     for k, v in d.items():
         key = f"{prefix}{k}"
-        if isinstance(v, (int, float)):  # numbers first (most entries; bool is an int): cheaper than Mapping's check
+        t = type(v)
+        if t is float or t is int or t is bool:  # most entries: the exact types first (cheapest)
+            out[key] = float(v)
+        elif t is dict:
+            out.update(_flatten(v, key + "."))
+        elif isinstance(v, (int, float)):  # numpy's floats and the like
             out[key] = float(v)
         elif isinstance(v, Mapping):
             out.update(_flatten(v, key + "."))

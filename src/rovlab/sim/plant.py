@@ -25,8 +25,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from rovlab._jit import njit
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import register_plant
 from rovlab.models.kinetics import P_BUOY, P_WEIGHT, rk4_scalars, submerged

@@ -40,6 +40,7 @@ from rovlab.params.design import DesignConfig, load_design_config
 from rovlab.params.validate import ConfigError, Problem
 from rovlab.params.vehicle import Vehicle, load_vehicle
 from rovlab.sim import metrics as mx
+from rovlab.sim import prebuilt
 from rovlab.sim.actuators import Actuators, make_actuators
 from rovlab.sim.components import build_pair
 from rovlab.sim.loop import Drive, Logs, draw, explain_allocation, loop_for, new_logs, new_work, run_loop
@@ -123,8 +124,51 @@ class DesignBook:
         key = (id(vehicle), id(config), *sorted(kw.items()))
         hit = self._designs.get(key)
         if hit is None or hit.vehicle is not vehicle or hit.config is not config:
-            hit = self._designs[key] = make_design(vehicle, config, **kw)
+            hit = self._designs[key] = stored_design(vehicle, config, **kw)
         return hit
+
+
+def stored_design(vehicle: Vehicle, config: DesignConfig, **kw: Any) -> Design:
+    """:func:`make_design`, kept on disk after the first time (``<cache>/design/``, pruned with
+    the other caches): a process that loads it imports neither scipy.linalg (~0.1 s) nor designs
+    (the Riccati equations, the discretisations). Keyed on the vehicle and the configuration as
+    loaded (every value), the arguments and rovlab's sources, so any change designs afresh; a
+    refused design raises every time (never stored); an unreadable file designs afresh."""
+    import hashlib
+    import os
+    import pickle
+
+    from rovlab import cache_home, source_digest
+
+    digest = source_digest()
+    try:
+        key = hashlib.sha1(f"{digest}".encode() + pickle.dumps((vehicle, config, sorted(kw.items())), protocol=5))
+    except (pickle.PicklingError, TypeError, AttributeError):
+        key = None
+    if digest is None or key is None:
+        return make_design(vehicle, config, **kw)
+    name = key.hexdigest()
+    path = cache_home() / "design" / f"sim-{name[:32]}.pickle"
+    try:
+        with open(path, "rb") as f:
+            stored = pickle.load(f)
+        if isinstance(stored, tuple) and len(stored) == 2 and stored[0] == name and isinstance(stored[1], Design):
+            try:
+                os.utime(path)  # its last use (rovlab.prune_caches)
+            except OSError:
+                pass
+            return stored[1]
+    except Exception:  # noqa: BLE001 -- no file, or a damaged or foreign one: design afresh
+        pass
+    design = make_design(vehicle, config, **kw)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_bytes(pickle.dumps((name, design), protocol=5))
+        os.replace(tmp, path)
+    except (OSError, pickle.PicklingError, TypeError, AttributeError):
+        pass
+    return design
 
 
 # --------------------------------------------------------------------------------------------
@@ -422,23 +466,44 @@ class Simulation:
         """The stateful components by slot (for saving/restoring state, rovlab.core.components)."""
         return {"plant": self.plant, "estimator": self.estimator, "controller": self.controller}
 
+    def loop_arguments(self, drive: Drive | None = None) -> tuple[Any, ...]:
+        """run_loop's arguments after (k0, k1, h) for a chunk driven by ``drive`` (default: the
+        whole run), with new logs for it."""
+        prep = self.prep
+        drive = prep.drive if drive is None else drive
+        logs = new_logs(drive.refs.shape[0], len(prep.channels), self.estimator.x.shape[0],
+                        prep.actuators.rows.shape[0], self.controller.state.shape[0])
+        return (self.plant, prep.sensors, self.estimator, self.controller, prep.actuators, prep.nav_of,
+                prep.nees_idx, drive, logs, self.work)
+
     def advance(self, drive: Drive) -> Logs:
         prep = self.prep
         n = drive.refs.shape[0]
-        logs = new_logs(n, len(prep.channels), self.estimator.x.shape[0], prep.actuators.rows.shape[0],
-                        self.controller.state.shape[0])
+        args = self.loop_arguments(drive)
+        logs = args[_LOGS]
         loop = loop_for(self.plant, self.estimator, self.controller)
+        # the loop built ahead of time when it is (no JIT start-up: rovlab.sim.prebuilt)
+        built = prebuilt.runner(args) if loop is run_loop else None
+        if built is None and _jit.without_numba():
+            raise prebuilt.NotBuilt(f"no loop built ahead of time takes the components of {prep.loop_key} "
+                                    "as this run makes them")
         t0 = time.perf_counter()
         with explain_allocation((self.plant, self.estimator, self.controller)):
-            done = loop(self.k, self.k + n, prep.h, self.plant, prep.sensors, self.estimator, self.controller,
-                        prep.actuators, prep.nav_of, prep.nees_idx, drive, logs, self.work)
-        if loop is run_loop and not self._marked:  # compiled or loaded from the disk cache
+            if built is not None:
+                done = built(self.k, self.k + n, prep.h)
+            else:
+                done = loop(self.k, self.k + n, prep.h, *args)
+        if built is None and loop is run_loop and not self._marked:  # compiled or loaded from the disk cache
             self._marked = True
             _jit.mark_compiled(prep.loop_key, time.perf_counter() - t0)
+            prebuilt.request(args, prep.loop_key)  # build it ahead of time for the next processes (background, once)
         self.k += done
         if done < n:
             raise PlantDiverged(self.k * prep.h, logs, done)
         return logs
+
+
+_LOGS = 8  # position of the logs in Simulation.loop_arguments
 
 
 def columns(prep: Prepared, logs: Logs, times: np.ndarray, refs: np.ndarray) -> dict[str, np.ndarray]:

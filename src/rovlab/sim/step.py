@@ -19,9 +19,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
-from rovlab._jit import WITHOUT_NRT
+from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.core.components import (
     controller_actuated,
     controller_step,
