@@ -25,15 +25,18 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64MultiArray
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-# the end-to-end observer keeps every message until its executor takes it: on a loaded machine
-# (CI) this Python process can fall behind the simulated vehicle's 100 Hz truth and its
-# catch-up bursts, and a depth-10 queue then dropped the first steps (the initial state)
-EVERYTHING = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+# the end-to-end observer keeps every message until its executor takes it (on a loaded machine
+# this Python process can fall behind the 100 Hz truth and its catch-up bursts) and asks for the
+# simulated vehicle's recent history (transient local): on a loaded machine (CI) discovery can
+# match it to the simulated vehicle a few seconds after the first step, which was then lost
+EVERYTHING = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+ALL_NEW = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)  # the node's (volatile) topics
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROVLAB = os.path.join(os.path.dirname(sys.executable), "rovlab")
 
@@ -228,7 +231,7 @@ def e2e(duration: float, logdir: str, scenario: str) -> dict:
             (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, -m.pose.position.z,
              2 * math.atan2(m.pose.orientation.z, m.pose.orientation.w))), EVERYTHING)
         node.create_subscription(Odometry, "/odometry", lambda m: est.append(
-            (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, -m.pose.pose.position.z)), EVERYTHING)
+            (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, -m.pose.pose.position.z)), ALL_NEW)
         spin_until(node, lambda: False, 1.0)  # subscribed before the simulated vehicle publishes its first step
         sim = start(["ros2", "sim", "--scenario", scenario], os.path.join(logdir, "sim.log"))
         nodep = start(["ros2", "node", "--vehicle", "udrone", "--config", "thesis"], os.path.join(logdir, "node.log"))

@@ -27,7 +27,7 @@ from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, WrenchStam
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, Imu
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
@@ -35,10 +35,13 @@ from rovlab.interfaces.node import ros_common as rc
 from rovlab.interfaces.node.core import NodeCore, NodeOutput
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-# the simulated vehicle makes up at most CATCH_UP steps at once after a stall; its truth and
-# set-point topics (what a recorder evaluates) keep more than one such burst for a slow reader
+# the simulated vehicle makes up at most CATCH_UP steps at once after a stall. Its truth and
+# set-point topics are what a recorder evaluates: they keep the last 10 s (1000 steps at 100 Hz)
+# for a reader that is slow (several bursts) or that discovery matched late (transient local: a
+# recorder asking for it gets the run from its first step even if it matched a few seconds in;
+# readers that ask for volatile data get only new samples, as before)
 CATCH_UP = 50
-RECORDED = QoSProfile(depth=4 * CATCH_UP, reliability=ReliabilityPolicy.RELIABLE)
+RECORDED = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def _stamp(msg_stamp: Any, seconds: float) -> Any:
