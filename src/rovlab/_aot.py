@@ -198,15 +198,19 @@ def build(where: Path | None = None) -> Path:
     return where
 
 
-def compile_module(where: Path, module: str, name: str, func: Callable[..., Any], signature: Any) -> Path:
+def compile_module(where: Path, module: str, name: str, func: Callable[..., Any], signature: Any, *,
+                   release_gil: bool = True) -> Path:
     """Compile the plain function ``func`` for ``signature`` (numba types) into the extension
     module ``where/module`` exporting it as ``name``, for this CPU; returns the module's path. The
     functions ``func`` calls are compiled as the JIT compiles them (their own flags; from numba's
-    disk cache when they are there, which makes a build take seconds instead of minutes)."""
+    disk cache when they are there, which makes a build take seconds instead of minutes).
+    ``release_gil``: as its JIT version's ``nogil`` (the filter's kernels release it, the
+    simulator's loop does not: threads sharing a run's scratch arrays stay serialised)."""
     import shutil
     import tempfile
 
     CC, host_cpu = _pycc()
+    _RELEASE_GIL[0] = release_gil
     where.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix=".build-", dir=where) as tmp:
         cc = CC(module)
@@ -222,6 +226,9 @@ def compile_module(where: Path, module: str, name: str, func: Callable[..., Any]
         shutil.move(str(made), str(partial))
         os.replace(partial, where / made.name)
         return where / made.name
+
+
+_RELEASE_GIL = [True]  # what the module being built does (compile_module's release_gil)
 
 
 def _pycc() -> tuple[Any, str]:
@@ -244,7 +251,7 @@ def _pycc() -> tuple[Any, str]:
         class _Flags(pycc_compiler.Flags):
             def __init__(self, *args: Any, **kwargs: Any) -> None:
                 super().__init__(*args, **kwargs)
-                self.release_gil = True  # type: ignore[assignment]
+                self.release_gil = _RELEASE_GIL[0]  # type: ignore[assignment]
 
         pycc_compiler.Flags = _Flags  # type: ignore[misc]
         codegen.AOTCPUCodegen._customize_tm_features = lambda self: self._get_host_cpu_features()  # type: ignore[method-assign]

@@ -26,7 +26,8 @@ from rovlab.sim import prebuilt
 from rovlab.sim.runner import Simulation, prepare
 from rovlab.sim.scenario import load_scenario
 
-_REPORT = ("import json, sys\nfrom rovlab.interfaces.cli import main\ncode = main({argv!r})\n"
+_REPORT = ("import json, sys\nfrom rovlab.interfaces.cli import main\nsys.argv = ['rovlab', *{argv!r}]\n"
+           "code = main()\n"
            "print(json.dumps({{'code': code, 'jit_started': 'numba.np.arraymath' in sys.modules, "
            "'numba': 'numba' in sys.modules, 'scipy_linalg': 'scipy.linalg' in sys.modules}}), file=sys.stderr)\n")
 
@@ -54,19 +55,74 @@ def test_a_plan_describes_every_leaf_and_the_wrapper_rebuilds_the_components():
     assert prebuilt.module_name(other) != prebuilt.module_name(description)
 
 
-def test_arguments_a_build_cannot_take_have_no_plan():
+def test_arguments_a_build_cannot_take_have_no_plan(tmp_path, monkeypatch):
+    monkeypatch.setenv("ROVLAB_AOT", "1")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     args = list(_arguments())
     drive = args[7]
     strided = drive._replace(refs=np.asfortranarray(drive.refs))  # not C-contiguous
     assert prebuilt.flatten([*args[:7], strided, *args[8:]]) is None
-    assert prebuilt.flatten([*args[:7], drive._replace(pset=[0] * len(drive.pset)), *args[8:]]) is None
-    # and the loop still runs them (the JIT loop)
+    assert prebuilt.flatten([*args[:7], drive._replace(pset=[0] * len(drive.pset)), *args[8:]]) is None  # a list
+    misaligned = np.zeros(8 * len(drive.heave_force) + 1, np.uint8)[1:].view(np.float64)
+    assert not misaligned.flags.aligned
+    assert prebuilt.flatten([*args[:7], drive._replace(heave_force=misaligned), *args[8:]]) is None
+    sub = drive.heave_force.view(np.recarray)  # an ndarray subclass: only the JIT loop knows what it makes of it
+    assert prebuilt.flatten([*args[:7], drive._replace(heave_force=sub), *args[8:]]) is None
+    # so the loop runs them through the JIT (no module even looked for)
     assert prebuilt.runner([*args[:7], strided, *args[8:]]) is None
 
 
-def test_disabled_in_the_suite_and_never_requested():
+def test_every_type_the_compiled_wrapper_would_read_differently_makes_another_module():
+    """The wrapper trusts its arguments, so whatever numba would type differently must change
+    the module: dtype (and byte order), rank, read-only, and Python bool/int/float against numpy
+    scalars."""
+    args = list(_arguments())
+    base = prebuilt.module_name(prebuilt.describe(prebuilt.flatten(args)[1]))
+    drive, plant = args[7], args[0]
+    readonly = drive.refs.copy()
+    readonly.flags.writeable = False
+    variants = {
+        "int32": drive._replace(pset=drive.pset.astype(np.int32)),
+        "big-endian": drive._replace(refs=drive.refs.astype(">f8")),
+        "rank": drive._replace(heave_force=drive.heave_force[:, None].copy()),
+        "read-only": drive._replace(refs=readonly),
+    }
+    names = {base}
+    for what, changed in variants.items():
+        name = prebuilt.module_name(prebuilt.describe(prebuilt.flatten([*args[:7], changed, *args[8:]])[1]))
+        assert name not in names, what
+        names.add(name)
+    assert isinstance(plant.n_sub, int) and isinstance(plant.h, float)
+    for what, value in {"bool": True, "float": 10.0, "numpy int": np.int64(10), "numpy int32": np.int32(10)}.items():
+        name = prebuilt.module_name(prebuilt.describe(prebuilt.flatten([plant._replace(n_sub=value), *args[1:]])[1]))
+        assert name not in names, what
+        names.add(name)
+
+
+def test_the_runner_passes_the_leaves_in_order_to_the_module_it_finds(monkeypatch):
+    monkeypatch.setenv("ROVLAB_AOT", "1")
+    args = _arguments()
+    leaves, shape = prebuilt.flatten(args)
+    name = prebuilt.module_name(prebuilt.describe(shape))
+    calls = []
+    monkeypatch.setitem(prebuilt._loaded, name, lambda *a: calls.append(a) or 7)
+    run = prebuilt.runner(args)
+    assert run is not None and run(3, 10, 0.1) == 7
+    (got,) = calls
+    assert got[:3] == (3, 10, 0.1) and len(got) == 3 + len(leaves)
+    assert all(a is b for a, b in zip(got[3:], leaves))
+    assert got[3] is args[0][0] and got[-1] is args[-1][-1]  # depth first: the plant's first field ... work's last
+
+
+def test_disabled_in_the_suite_and_never_requested(monkeypatch):
     assert not prebuilt.enabled()  # tests/conftest.py: ROVLAB_AOT=0
     assert prebuilt.runner(_arguments()) is None and prebuilt.request(_arguments(), "process-kf-lqg") is None
+    from rovlab import _jit
+
+    monkeypatch.setenv("ROVLAB_AOT", "1")
+    assert prebuilt.enabled()
+    monkeypatch.setattr(_jit, "interpreting", lambda: True)  # running interpreted: never the built loop either
+    assert not prebuilt.enabled()
 
 
 def _env(cache, aot: str) -> dict[str, str]:
@@ -112,9 +168,10 @@ def _monte_carlo(folder) -> dict:
 @pytest.mark.skipif(not (shutil.which("gcc") or shutil.which("cc")), reason="building needs a C compiler")
 def test_first_run_builds_the_loop_then_runs_it_without_numba(tmp_path):
     cache = tmp_path / "cache"
+    name = prebuilt.module_name(prebuilt.describe(prebuilt.flatten(_arguments())[1]))
+    (Path(os.environ["NUMBA_CACHE_DIR"]) / "rovlab-ready" / f"{name}.log").unlink(missing_ok=True)  # an earlier one
     status, err = _simulate(tmp_path / "jit", cache, "1")  # the JIT loop; the build starts
     assert status["code"] == 0 and status["jit_started"], err
-    name = prebuilt.module_name(prebuilt.describe(prebuilt.flatten(_arguments())[1]))
     log = _wait_for_build(name)
     assert "built" in log, log
     # built: no numba at all, and the design comes from the disk (no scipy.linalg either)
@@ -134,22 +191,39 @@ def test_first_run_builds_the_loop_then_runs_it_without_numba(tmp_path):
     assert status["code"] == 0 and status["jit_started"], err
     assert _monte_carlo(tmp_path / "mc-aot") == _monte_carlo(tmp_path / "mc-jit")
     assert (tmp_path / "mc-aot" / "timeseries.csv").read_bytes() == (tmp_path / "jit" / "timeseries.csv").read_bytes()
+    # a marker pointing at a module that loads but does not take the run's arguments (here: the
+    # observer plant's combination pointed at the process plant's module): no interpreted loop,
+    # the command says so and starts again with the JIT loop
+    folder = next((cache / "rovlab" / "aot").iterdir())
+    (folder / f"observer-kf-lqg{prebuilt.MARKER}").write_text(name)
+    argv = ["simulate", "step-observer-model", "--out", str(tmp_path / "restart"), "--no-figures"]
+    res = subprocess.run([sys.executable, "-c", _REPORT.format(argv=argv)], capture_output=True, text=True,
+                         env=_env(cache, "1"), timeout=900)
+    assert res.returncode == 0, res.stderr
+    assert "starting again with the JIT loop (ROVLAB_AOT=0)" in res.stderr, res.stderr
+    status = json.loads(res.stderr.strip().splitlines()[-1])
+    assert status["code"] == 0 and status["jit_started"], res.stderr
+    assert (tmp_path / "restart" / "timeseries.csv").is_file()
 
 
-def test_a_built_loop_that_does_not_fit_starts_the_command_again_with_the_jit(tmp_path, monkeypatch):
-    """The combination's marker points at a module, but not one that takes these arguments (e.g.
-    a scenario whose components are made differently): the numba-free process must not run the
-    loop interpreted; it says so and starts again with ROVLAB_AOT=0."""
+def test_a_module_that_does_not_load_is_removed_and_the_run_uses_the_jit(tmp_path, monkeypatch):
+    """The combination's marker points at a damaged module: the process does not go without
+    numba, the run takes the JIT loop, and the module and its marker are removed (so the next
+    run that compiles builds it again)."""
     from rovlab import _aot
 
     cache = tmp_path / "cache"
     monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
+    monkeypatch.setenv("ROVLAB_AOT", "1")
     where = _aot.folder()
     where.mkdir(parents=True)
-    (where / f"process-kf-lqg{prebuilt.MARKER}").write_text("rovlab_loop_0000000000000000")
-    (where / f"rovlab_loop_0000000000000000{importlib.machinery.EXTENSION_SUFFIXES[0]}").write_bytes(b"")
-    assert prebuilt.built_for("process-kf-lqg") is False  # ROVLAB_AOT=0 in the suite
+    marker = where / f"process-kf-lqg{prebuilt.MARKER}"
+    marker.write_text("rovlab_loop_0000000000000000")
+    damaged = where / f"rovlab_loop_0000000000000000{importlib.machinery.EXTENSION_SUFFIXES[0]}"
+    damaged.write_bytes(b"not a shared object")
+    assert prebuilt.built_for("process-kf-lqg")  # the files are there ...
     status, err = _simulate(tmp_path / "out", cache, "1")
-    assert "starting again with the JIT loop (ROVLAB_AOT=0)" in err, err
-    assert status["code"] == 0 and status["jit_started"], err
+    assert status["code"] == 0 and status["jit_started"] and status["numba"], err  # ... but it did not load
+    assert "starting again" not in err
+    assert not damaged.exists() and not marker.exists()
     assert (tmp_path / "out" / "timeseries.csv").is_file()

@@ -72,9 +72,11 @@ def _parser_for(argv: Sequence[str]) -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     from rovlab.params.validate import ConfigError
 
+    whole_process = argv is None  # the command line of this process (may restart it: cli_sim)
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = _parser_for(argv)
     args = parser.parse_args(argv)
+    args.whole_process = whole_process
     try:
         return int(args.func(args) or 0)
     except (ConfigError, UserError) as exc:

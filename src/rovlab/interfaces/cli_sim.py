@@ -70,7 +70,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     data, file = load_scenario_data(args.scenario)
     name = str(data.get("name") or Path(file).stem)
     out = Path(args.out or Path("out") / name)
-    first_run(data, file, args.scenario, args.runs, args.workers)
+    # numba-free only when this process is the command (a script or notebook calling main([...])
+    # keeps its numba, and is never restarted)
+    first_run(data, file, args.scenario, args.runs, args.workers, numba_free=getattr(args, "whole_process", False))
     from rovlab.sim.prebuilt import NotBuilt
 
     try:
@@ -171,7 +173,7 @@ def announce_compile(loops: list[tuple[str, str, float] | None]) -> None:
 
 
 def first_run(data, file, ref: str, runs: int, workers: int | None, design: str | None = None,
-              live: bool = False) -> None:
+              live: bool = False, numba_free: bool = False) -> None:
     """Before anything is compiled: if the loop for this scenario's components is not in the cache
     yet, either run it interpreted (short work, or ``live``: paced at most 50x real time, which the
     interpreter keeps up with; the loop compiles in the background for the next runs) or say that
@@ -184,7 +186,7 @@ def first_run(data, file, ref: str, runs: int, workers: int | None, design: str 
     if loop is None or _jit.interpreting():
         return  # a bad scenario (reported by the run) or NUMBA_DISABLE_JIT set by the user
     key, what, rows = loop
-    if mode != "interpret" and not live and prebuilt.built_for(key) and _jit.run_without_numba():
+    if numba_free and mode != "interpret" and not live and prebuilt.loads_for(key) and _jit.run_without_numba():
         return  # the loop built ahead of time runs, and numba is not even imported (rovlab.sim.prebuilt)
     work = 0 if live else int(runs * rows)
     tier = first_run_tier(mode, _jit.is_compiled(key) or prebuilt.built_for(key), work,

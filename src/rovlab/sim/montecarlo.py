@@ -119,19 +119,16 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     ctx = mp.get_context("fork") if fork else mp.get_context()
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=_init_worker,
                                initargs=(campaign if fork else None, data, file, seeds[0]))
-    futures = []
+    futures = [pool.submit(_worker_chunk, c) for c in chunks]
+    if meanwhile is not None:  # the workers are forked and busy: the caller's own work now
+        try:
+            meanwhile()
+        except BaseException:  # its error (or Ctrl-C) ends the command: stop the workers at once
+            _stop(pool, futures)
+            raise
     try:
         if progress:
             progress(done, n)
-        futures = [pool.submit(_worker_chunk, c) for c in chunks]
-        if meanwhile is not None:  # the workers are forked and busy: the caller's own work now
-            try:
-                meanwhile()
-            except BaseException:
-                for fut in futures:
-                    fut.cancel()
-                pool.shutdown(wait=False, cancel_futures=True)
-                raise
         for fut in as_completed(futures):
             for r in fut.result():
                 results[r["seed"]] = r
@@ -147,6 +144,16 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
         return [results[s] for s in seeds if s in results]
     pool.shutdown()
     return [results[s] for s in seeds]
+
+
+def _stop(pool: ProcessPoolExecutor, futures: list) -> None:
+    """Cancel what has not started and end the worker processes (a chunk under way would
+    otherwise run to its end before the interpreter may exit)."""
+    for fut in futures:
+        fut.cancel()
+    for proc in list(getattr(pool, "_processes", {}).values()):  # no public way before Python 3.14
+        proc.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
 
 
 def _guided_chunks(seeds: Sequence[int], workers: int, *, largest: int = 100, smallest: int = 1) -> list[list[int]]:

@@ -2,9 +2,9 @@
 
 Calling a numba dispatcher costs a process ~0.4 s the first time, even when the compiled loop
 comes from the disk cache: numba sets up its typing and lowering registries before it can look
-the loop up. For a whole `rovlab montecarlo` of 1000 runs that is a quarter of the time. The
-loop built into an extension module (numba.pycc, rovlab._aot) loads in under a millisecond and
-runs the same machine code: its logs are bit-identical to the JIT loop's (tested).
+the loop up, and importing numba costs another ~0.2 s. For `rovlab simulate --runs 1000` that
+was a third of the time. The loop built into an extension module (numba.pycc, rovlab._aot)
+loads in under a millisecond, and its logs are bit-identical to the JIT loop's (tested).
 
 numba.pycc exports functions of arrays and scalars, not of components (NamedTuples), so each
 combination gets a flat wrapper: its arguments are the leaves of :func:`rovlab.sim.loop.run_loop`'s
@@ -115,7 +115,9 @@ def describe(shape: tuple[Any, ...]) -> list[Any]:
 
 
 def digest(description: list[Any]) -> str:
-    return hashlib.sha1(json.dumps(description).encode()).hexdigest()[:16]
+    """The module's key: the description and numpy's version (a module built against one numpy
+    must not be loaded by another; the folder is already per rovlab sources and CPU)."""
+    return hashlib.sha1(f"numpy {np.__version__} ".encode() + json.dumps(description).encode()).hexdigest()[:16]
 
 
 def module_name(description: list[Any]) -> str:
@@ -126,7 +128,8 @@ def module_name(description: list[Any]) -> str:
 # Using a built loop
 # --------------------------------------------------------------------------------------------
 
-_found: dict[tuple[Any, ...], Callable[..., Any] | None] = {}  # shape -> built function (this process)
+_names: dict[tuple[Any, ...], str] = {}  # shape -> module name (this process)
+_loaded: dict[str, Callable[..., Any]] = {}  # module name -> its loaded function (this process)
 _requested: set[str] = set()  # modules whose build this process asked for
 
 
@@ -145,23 +148,34 @@ def runner(args: Sequence[Any]) -> Callable[[int, int, float], int] | None:
     if flat is None:
         return None
     leaves, shape = flat
-    try:
-        fn = _found[shape]
-    except KeyError:
-        fn = _find(shape)
-        _found[shape] = fn
+    name = _names.get(shape)
+    if name is None:
+        name = _names[shape] = module_name(describe(shape))
+    fn = _loaded.get(name) or _load(name)  # not found yet: looked for again next time (a build may end)
     if fn is None:
         return None
     return lambda k0, k1, h: fn(k0, k1, h, *leaves)
 
 
-def _find(shape: tuple[Any, ...]) -> Callable[..., Any] | None:
+def _load(name: str) -> Callable[..., Any] | None:
+    """The built module ``name``'s loop, loaded once per process; None if it is not built. A
+    module that is there but does not load (damaged, or built by another numpy or Python) is
+    removed with its markers, so that the next run that compiles the JIT loop builds it again."""
     where = _aot.folder()
-    if where is None:
+    path = _aot.module_file(where, name) if where is not None else None
+    if path is None:
         return None
-    name = module_name(describe(shape))
-    path = _aot.module_file(where, name)
-    return _aot.load(path, name, EXPORT) if path is not None else None
+    fn = _aot.load(path, name, EXPORT)
+    if fn is None:
+        for gone in (path, *path.parent.glob(f"*{MARKER}")):
+            try:
+                if gone == path or gone.read_text(encoding="utf-8").strip() == name:
+                    gone.unlink()
+            except OSError:
+                pass
+        return None
+    _loaded[name] = fn
+    return fn
 
 
 def status(args: Sequence[Any]) -> str:
@@ -187,6 +201,19 @@ def built_for(key: str) -> bool:
     except OSError:
         return False
     return _aot.module_file(where, name) is not None
+
+
+def loads_for(key: str) -> bool:
+    """Whether the module built for the combination ``key`` is there and loads (what a process
+    checks before it goes without numba: rovlab.interfaces.cli_sim.first_run)."""
+    where = _aot.folder() if enabled() else None
+    if where is None:
+        return False
+    try:
+        name = (where / f"{key}{MARKER}").read_text(encoding="utf-8").strip()
+    except OSError:
+        return False
+    return _loaded.get(name) is not None or _load(name) is not None
 
 
 def request(args: Sequence[Any], key: str) -> str | None:
@@ -276,7 +303,8 @@ def build(description: list[Any], where: Path | None = None) -> Path:
     namespace: dict[str, Any] = {"run_loop": run_loop, **classes}
     exec(compile(source, f"<rovlab.sim.prebuilt {module_name(description)}>", "exec"), namespace)
     signature = types.int64(types.int64, types.int64, types.float64, *(_numba_type(s) for s in specs))
-    return _aot.compile_module(where, module_name(description), EXPORT, namespace[EXPORT], signature)
+    return _aot.compile_module(where, module_name(description), EXPORT, namespace[EXPORT], signature,
+                               release_gil=False)
 
 
 def simulation(scenario: str, design: str | None = None) -> Any:
@@ -290,7 +318,9 @@ def simulation(scenario: str, design: str | None = None) -> Any:
 
 
 def _write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
+    import os
+
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(text, encoding="utf-8")
     tmp.replace(path)
 
@@ -338,14 +368,20 @@ def main(argv: list[str] | None = None) -> int:
         built_path = _aot.module_file(where, name) if where is not None else None
         if built_path is not None and not args.force:
             if key:
-                _write(built_path.parent / f"{key}{MARKER}", name)
+                try:
+                    _write(built_path.parent / f"{key}{MARKER}", name)
+                except OSError:
+                    pass
             print(f"already built: {built_path}")
             return 0
         t0 = time.perf_counter()
         path = build(description, where)
-        if key and where is not None:
-            _write(where / f"{key}{MARKER}", name)
         print(f"built {path} in {time.perf_counter() - t0:.1f} s")
+        if key and where is not None:
+            try:
+                _write(where / f"{key}{MARKER}", name)
+            except OSError as exc:  # built all the same: a run that prepares its arguments finds it
+                print(f"note: could not write the marker of {key}: {exc}", file=sys.stderr)
         return 0
     except Exception as exc:  # the log says why; the runs keep using the JIT loop
         why = f"{type(exc).__name__}: {exc}"

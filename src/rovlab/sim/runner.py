@@ -141,9 +141,10 @@ def stored_design(vehicle: Vehicle, config: DesignConfig, **kw: Any) -> Design:
     from rovlab import cache_home, source_digest
 
     digest = source_digest()
-    try:
-        key = hashlib.sha1(f"{digest}".encode() + pickle.dumps((vehicle, config, sorted(kw.items())), protocol=5))
-    except (pickle.PicklingError, TypeError, AttributeError):
+    try:  # numpy's version too: a stored design must load where it is used
+        key = hashlib.sha1(f"{digest} numpy {np.__version__}".encode()
+                           + pickle.dumps((vehicle, config, sorted(kw.items())), protocol=5))
+    except Exception:  # noqa: BLE001 -- something that does not pickle: design every time
         key = None
     if digest is None or key is None:
         return make_design(vehicle, config, **kw)
@@ -157,7 +158,9 @@ def stored_design(vehicle: Vehicle, config: DesignConfig, **kw: Any) -> Design:
                 os.utime(path)  # its last use (rovlab.prune_caches)
             except OSError:
                 pass
-            return stored[1]
+            # the caller's own vehicle and configuration (equal to the stored ones), so that
+            # DesignBook.design recognises the design as theirs and does not load it again
+            return replace(stored[1], vehicle=vehicle, config=config)
     except Exception:  # noqa: BLE001 -- no file, or a damaged or foreign one: design afresh
         pass
     design = make_design(vehicle, config, **kw)
@@ -166,7 +169,7 @@ def stored_design(vehicle: Vehicle, config: DesignConfig, **kw: Any) -> Design:
         tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         tmp.write_bytes(pickle.dumps((name, design), protocol=5))
         os.replace(tmp, path)
-    except (OSError, pickle.PicklingError, TypeError, AttributeError):
+    except Exception:  # noqa: BLE001 -- a cache that cannot be written costs only the time
         pass
     return design
 
@@ -476,24 +479,26 @@ class Simulation:
         return (self.plant, prep.sensors, self.estimator, self.controller, prep.actuators, prep.nav_of,
                 prep.nees_idx, drive, logs, self.work)
 
-    def advance(self, drive: Drive) -> Logs:
+    def advance(self, drive: Drive, *, built: bool = True) -> Logs:
+        """Run len(drive.refs) control steps; ``built=False``: through numba's JIT even when the
+        loop is built ahead of time (rovlab.sim.warm compiles it)."""
         prep = self.prep
         n = drive.refs.shape[0]
         args = self.loop_arguments(drive)
         logs = args[_LOGS]
         loop = loop_for(self.plant, self.estimator, self.controller)
         # the loop built ahead of time when it is (no JIT start-up: rovlab.sim.prebuilt)
-        built = prebuilt.runner(args) if loop is run_loop else None
-        if built is None and _jit.without_numba():
+        fast = prebuilt.runner(args) if built and loop is run_loop else None
+        if fast is None and _jit.without_numba():
             raise prebuilt.NotBuilt(f"no loop built ahead of time takes the components of {prep.loop_key} "
                                     "as this run makes them")
         t0 = time.perf_counter()
         with explain_allocation((self.plant, self.estimator, self.controller)):
-            if built is not None:
-                done = built(self.k, self.k + n, prep.h)
+            if fast is not None:
+                done = fast(self.k, self.k + n, prep.h)
             else:
                 done = loop(self.k, self.k + n, prep.h, *args)
-        if built is None and loop is run_loop and not self._marked:  # compiled or loaded from the disk cache
+        if fast is None and loop is run_loop and not self._marked:  # compiled or loaded from the disk cache
             self._marked = True
             _jit.mark_compiled(prep.loop_key, time.perf_counter() - t0)
             prebuilt.request(args, prep.loop_key)  # build it ahead of time for the next processes (background, once)

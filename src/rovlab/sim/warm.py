@@ -45,7 +45,8 @@ def main(argv: list[str] | None = None) -> int:
         prep = prepare(load_scenario(args.scenario), config=config)
         if prep.loop_key != args.key:
             print(f"note: the scenario's components are {prep.loop_key}, not {args.key}", file=sys.stderr)
-        Simulation(prep).advance(first_rows(prep.drive, 1))
+        # the JIT loop itself, not a module built ahead of time (advance then starts that build)
+        Simulation(prep).advance(first_rows(prep.drive, 1), built=False)
         print(f"compiled the loop for {prep.loop_key} in {time.perf_counter() - t0:.1f} s")
         return 0
     except Exception as exc:  # a log for the curious; the foreground run has its own errors
