@@ -45,7 +45,7 @@ print(json.dumps(out))
 
 def _time(src: Path, repeat: int) -> dict[str, float]:
     env = dict(os.environ, PYTHONPATH=str(src), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1",
-               NUMBA_NUM_THREADS="1")
+               NUMBA_NUM_THREADS="1", ROVLAB_AOT="0")  # the JIT loop in every tree (no background builds)
     out = subprocess.run([sys.executable, "-c", SNIPPET, str(repeat)], env=env, check=True,
                          capture_output=True, text=True, cwd=tempfile.gettempdir())
     return json.loads(out.stdout.strip().splitlines()[-1])

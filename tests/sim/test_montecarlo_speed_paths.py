@@ -106,6 +106,37 @@ def test_no_figures_renders_no_nees_plot(tmp_path):
     assert mc["runs"] == 3 and mc["seeds"] == [1, 2, 3]
 
 
+def test_chi_square_quantiles_are_kept_on_disk_as_scipy_computes_them(tmp_path, monkeypatch):
+    """A process that needs only quantiles computed before reads them instead of importing
+    scipy.special (consistency.chi2_ppf); what is stored is scipy's value to the last bit."""
+    import json
+
+    from scipy.stats import chi2
+
+    from rovlab.estimation import consistency as cons
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setattr(cons, "_QUANTILES", {})
+    monkeypatch.setattr(cons, "_LOADED", [])
+    counts = np.array([[1000, 1000, 999], [3, 1000, 1]])
+    got = cons.chi2_ppf(0.975, 4 * counts)
+    np.testing.assert_array_equal(got, chi2.ppf(0.975, 4 * counts))
+    assert cons.chi2_ppf(0.025, 6) == float(chi2.ppf(0.025, 6))
+    path = tmp_path / "rovlab" / "chi2-quantiles.json"
+    stored = json.loads(path.read_text())
+    assert stored["0.975 4000"] == float(chi2.ppf(0.975, 4000)) and len(stored) == 5  # 4000, 3996, 12, 4, and 6
+    # a new process reads them: here, the file is the only place the (altered) value can come from
+    stored["0.025 6"] = 1.5
+    path.write_text(json.dumps(stored))
+    monkeypatch.setattr(cons, "_QUANTILES", {})
+    monkeypatch.setattr(cons, "_LOADED", [])
+    assert cons.chi2_ppf(0.025, 6) == 1.5
+    path.write_text("{damaged")  # a damaged file: computed again
+    monkeypatch.setattr(cons, "_QUANTILES", {})
+    monkeypatch.setattr(cons, "_LOADED", [])
+    assert cons.chi2_ppf(0.025, 6) == float(chi2.ppf(0.025, 6))
+
+
 def test_a_design_is_stored_once_and_loaded_as_it_was_made(tmp_path, monkeypatch):
     """A process whose design is on disk neither designs nor imports scipy.linalg
     (runner.stored_design); the stored design runs exactly like the one just made."""

@@ -16,11 +16,11 @@ uses; angle errors must be wrapped before calling them (see ``wrap_errors``).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from rovlab.core.angles import wrap
 
@@ -59,14 +59,62 @@ def chi2_interval(dof: int, runs: int = 1, probability: float = 0.95) -> tuple[f
         raise ValueError("need dof >= 1, runs >= 1 and 0 < probability < 1")
     a = (1.0 - probability) / 2.0
     k = dof * runs
-    return float(_chi2_ppf(a, k) / runs), float(_chi2_ppf(1.0 - a, k) / runs)
+    return float(chi2_ppf(a, k) / runs), float(chi2_ppf(1.0 - a, k) / runs)
 
 
-def _chi2_ppf(q: float, dof: Any) -> Any:
+def chi2_ppf(q: float, dof: Any) -> Any:
     """scipy.stats.chi2.ppf(q, dof) for 0 < q < 1 and dof >= 1 (an int or an int array), by the
-    special function scipy.stats computes it with (the inverse of the regularised lower incomplete
-    gamma function), so without importing scipy.stats (~0.5 s of every Monte Carlo process)."""
-    return 2.0 * gammaincinv(np.asarray(dof, dtype=float) / 2.0, q)
+    special function scipy.stats computes it with (2 gammaincinv(dof/2, q), the inverse of the
+    regularised lower incomplete gamma function), without importing scipy.stats (~0.5 s).
+
+    The values are kept (in this process, and on disk in ``<cache>/chi2-quantiles.json``), so a
+    process that needs only quantiles computed before does not import scipy.special either
+    (~0.08 s of every Monte Carlo and simulation process); the stored numbers are scipy's, to the
+    last bit."""
+    d = np.asarray(dof)
+    if d.ndim == 0:
+        out: Any = _quantiles(float(q), [d.item()])[0]
+        return out
+    uniq, inverse = np.unique(d, return_inverse=True)
+    return np.asarray(_quantiles(float(q), uniq.tolist()), dtype=float)[inverse].reshape(d.shape)
+
+
+_QUANTILES: dict[str, float] = {}  # "q dof" -> chi2.ppf(q, dof), as stored (rovlab.cache_home)
+_LOADED: list[bool] = []
+
+
+def _quantiles(q: float, dofs: list[Any]) -> list[float]:
+    import json
+
+    from rovlab import cache_home
+
+    path = cache_home() / "chi2-quantiles.json"
+    if not _LOADED:
+        _LOADED.append(True)
+        try:
+            stored = json.loads(path.read_text(encoding="utf-8"))
+            _QUANTILES.update({k: float(v) for k, v in stored.items() if isinstance(v, float)})
+        except (OSError, ValueError, AttributeError):
+            pass  # none yet, or damaged: computed again
+    out, missing = [], False
+    for dof in dofs:
+        key = f"{q!r} {dof!r}"
+        value = _QUANTILES.get(key)
+        if value is None:
+            from scipy.special import gammaincinv
+
+            value = _QUANTILES[key] = float(2.0 * gammaincinv(float(dof) / 2.0, q))
+            missing = True
+        out.append(value)
+    if missing:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+            tmp.write_text(json.dumps(_QUANTILES), encoding="utf-8")
+            os.replace(tmp, path)
+        except OSError:
+            pass  # a cache that cannot be written costs only the time
+    return out
 
 
 @dataclass(frozen=True)
@@ -94,8 +142,8 @@ class ConsistencyCheck:
         ok = count > 0
         a = (1.0 - self.probability) / 2.0
         k = self.dof * count[ok]
-        lo[ok] = _chi2_ppf(a, k) / count[ok]
-        hi[ok] = _chi2_ppf(1.0 - a, k) / count[ok]
+        lo[ok] = chi2_ppf(a, k) / count[ok]
+        hi[ok] = chi2_ppf(1.0 - a, k) / count[ok]
         return lo, hi
 
     @property
