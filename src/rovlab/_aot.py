@@ -263,6 +263,15 @@ def _pycc() -> tuple[Any, str]:
     return CC, binding.get_host_cpu_name()
 
 
+def record_failure(path: Path, why: str) -> None:
+    """Write why a build failed (it is then not retried until rovlab's sources change)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(why + "\n", encoding="utf-8")
+    except OSError:
+        pass  # the next run tries again
+
+
 def build_in_background() -> str | None:
     """Start ``python -m rovlab._aot build`` detached and at low priority unless it runs already;
     returns its log file (None when there is nowhere to build)."""
@@ -299,11 +308,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"building the ahead-of-time kernels failed: {why}", file=sys.stderr)
         where = folder()
         if where is not None:
-            try:
-                where.mkdir(parents=True, exist_ok=True)
-                (where / FAILED).write_text(why + "\n", encoding="utf-8")
-            except OSError:
-                pass
+            record_failure(where / FAILED, why)
         return 1
     finally:
         if args.lock:

@@ -16,7 +16,6 @@ uses; angle errors must be wrapped before calling them (see ``wrap_errors``).
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -107,11 +106,11 @@ def _quantiles(q: float, dofs: list[Any]) -> list[float]:
             missing = True
         out.append(value)
     if missing:
+        from rovlab.core.files import atomic_write_text
+
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-            tmp.write_text(json.dumps(_QUANTILES), encoding="utf-8")
-            os.replace(tmp, path)
+            atomic_write_text(path, json.dumps(_QUANTILES))
         except OSError:
             pass  # a cache that cannot be written costs only the time
     return out

@@ -322,42 +322,13 @@ def cached_filter_model(vehicle: Vehicle, config: DesignConfig) -> FilterModel:
     For commands that run a designed filter and nothing else (``rovlab filter``): designing
     (scipy.special's import, the discretisation, the observability and start-up analyses) costs
     ~4 MiB of peak memory and a few tens of milliseconds of a run that is otherwise about a
-    second (numba imports scipy.linalg itself). The file is keyed on the vehicle and the
-    configuration as loaded (every value) and on rovlab's sources (:func:`rovlab.source_digest`),
-    so any change to either designs afresh; a refused design is never stored (it raises every
-    time), an unreadable or foreign file is ignored and a cache that cannot be written costs
-    nothing but the time.
+    second (numba imports scipy.linalg itself). Kept by rovlab.core.store (keyed on the vehicle,
+    the configuration, rovlab's sources); a refused design is never stored (it raises every
+    time).
     """
-    import hashlib
-    import os
-    import pickle
+    from rovlab.core.store import stored
 
-    from rovlab import cache_home, source_digest
-
-    digest = source_digest()
-    if digest is None:
-        return build_filter_model(vehicle, config)
-    key = hashlib.sha1(digest.encode() + pickle.dumps((vehicle, config), protocol=5)).hexdigest()
-    path = cache_home() / "design" / f"{key[:32]}.pickle"
-    try:
-        with open(path, "rb") as f:
-            stored = pickle.load(f)
-        if isinstance(stored, tuple) and len(stored) == 2 and stored[0] == key and isinstance(stored[1], FilterModel):
-            try:
-                os.utime(path)  # its last use (rovlab.prune_caches removes designs unused for weeks)
-            except OSError:
-                pass
-            return stored[1]
-    except Exception:  # noqa: BLE001 -- no file, or a damaged one: design afresh
-        pass
-    model = build_filter_model(vehicle, config)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        tmp.write_bytes(pickle.dumps((key, model), protocol=5))
-        os.replace(tmp, path)
-    except OSError:
-        pass
+    model: FilterModel = stored("", (vehicle, config), lambda: build_filter_model(vehicle, config), FilterModel)
     return model
 
 

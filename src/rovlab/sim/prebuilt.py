@@ -178,42 +178,29 @@ def _load(name: str) -> Callable[..., Any] | None:
     return fn
 
 
-def status(args: Sequence[Any]) -> str:
-    """"built", "missing", "failed" or "unbuildable" for these arguments of run_loop."""
-    flat = flatten(args)
-    where = _aot.folder()
-    if flat is None or where is None:
-        return "unbuildable"
-    name = module_name(describe(flat[1]))
-    if _aot.module_file(where, name) is not None:
-        return "built"
-    return "failed" if (where / f"{name}{FAILED}").is_file() else "missing"
+def _marked(key: str) -> tuple[Path, str] | None:
+    """(folder, module name) that the marker of the combination ``key`` names, if any."""
+    where = _aot.folder() if enabled() else None
+    if where is None:
+        return None
+    try:
+        return where, (where / f"{key}{MARKER}").read_text(encoding="utf-8").strip()
+    except OSError:
+        return None
 
 
 def built_for(key: str) -> bool:
     """Whether a loop for the combination of components ``key`` (rovlab._jit.loop_key) is built:
     then a first run need neither compile nor interpret (rovlab.interfaces.cli_sim.first_run)."""
-    where = _aot.folder() if enabled() else None
-    if where is None:
-        return False
-    try:
-        name = (where / f"{key}{MARKER}").read_text(encoding="utf-8").strip()
-    except OSError:
-        return False
-    return _aot.module_file(where, name) is not None
+    marked = _marked(key)
+    return marked is not None and _aot.module_file(*marked) is not None
 
 
 def loads_for(key: str) -> bool:
     """Whether the module built for the combination ``key`` is there and loads (what a process
     checks before it goes without numba: rovlab.interfaces.cli_sim.first_run)."""
-    where = _aot.folder() if enabled() else None
-    if where is None:
-        return False
-    try:
-        name = (where / f"{key}{MARKER}").read_text(encoding="utf-8").strip()
-    except OSError:
-        return False
-    return _loaded.get(name) is not None or _load(name) is not None
+    marked = _marked(key)
+    return marked is not None and (_loaded.get(marked[1]) is not None or _load(marked[1]) is not None)
 
 
 def request(args: Sequence[Any], key: str) -> str | None:
@@ -318,11 +305,9 @@ def simulation(scenario: str, design: str | None = None) -> Any:
 
 
 def _write(path: Path, text: str) -> None:
-    import os
+    from rovlab.core.files import atomic_write_text
 
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    atomic_write_text(path, text)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -387,11 +372,7 @@ def main(argv: list[str] | None = None) -> int:
         why = f"{type(exc).__name__}: {exc}"
         print(f"building the loop ahead of time failed: {why}", file=sys.stderr)
         if where is not None and name is not None:
-            try:
-                where.mkdir(parents=True, exist_ok=True)
-                (where / f"{name}{FAILED}").write_text(why + "\n", encoding="utf-8")
-            except OSError:
-                pass
+            _aot.record_failure(where / f"{name}{FAILED}", why)
         return 1
     finally:
         if args.lock:

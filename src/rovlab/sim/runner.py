@@ -129,49 +129,16 @@ class DesignBook:
 
 
 def stored_design(vehicle: Vehicle, config: DesignConfig, **kw: Any) -> Design:
-    """:func:`make_design`, kept on disk after the first time (``<cache>/design/``, pruned with
-    the other caches): a process that loads it imports neither scipy.linalg (~0.1 s) nor designs
-    (the Riccati equations, the discretisations). Keyed on the vehicle and the configuration as
-    loaded (every value), the arguments and rovlab's sources, so any change designs afresh; a
-    refused design raises every time (never stored); an unreadable file designs afresh."""
-    import hashlib
-    import os
-    import pickle
+    """:func:`make_design`, kept on disk after the first time (rovlab.core.store): a process that
+    loads it imports neither scipy.linalg (~0.1 s) nor designs (the Riccati equations, the
+    discretisations). A refused design raises every time (never stored)."""
+    from rovlab.core.store import stored
 
-    from rovlab import cache_home, source_digest
-
-    digest = source_digest()
-    try:  # numpy's version too: a stored design must load where it is used
-        key = hashlib.sha1(f"{digest} numpy {np.__version__}".encode()
-                           + pickle.dumps((vehicle, config, sorted(kw.items())), protocol=5))
-    except Exception:  # noqa: BLE001 -- something that does not pickle: design every time
-        key = None
-    if digest is None or key is None:
-        return make_design(vehicle, config, **kw)
-    name = key.hexdigest()
-    path = cache_home() / "design" / f"sim-{name[:32]}.pickle"
-    try:
-        with open(path, "rb") as f:
-            stored = pickle.load(f)
-        if isinstance(stored, tuple) and len(stored) == 2 and stored[0] == name and isinstance(stored[1], Design):
-            try:
-                os.utime(path)  # its last use (rovlab.prune_caches)
-            except OSError:
-                pass
-            # the caller's own vehicle and configuration (equal to the stored ones), so that
-            # DesignBook.design recognises the design as theirs and does not load it again
-            return replace(stored[1], vehicle=vehicle, config=config)
-    except Exception:  # noqa: BLE001 -- no file, or a damaged or foreign one: design afresh
-        pass
-    design = make_design(vehicle, config, **kw)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        tmp.write_bytes(pickle.dumps((name, design), protocol=5))
-        os.replace(tmp, path)
-    except Exception:  # noqa: BLE001 -- a cache that cannot be written costs only the time
-        pass
-    return design
+    design = stored("sim-", (vehicle, config, sorted(kw.items())), lambda: make_design(vehicle, config, **kw), Design)
+    # the caller's own vehicle and configuration (equal to the stored ones), so that
+    # DesignBook.design recognises the design as theirs and does not load it again
+    return design if design.vehicle is vehicle and design.config is config else \
+        replace(design, vehicle=vehicle, config=config)
 
 
 # --------------------------------------------------------------------------------------------
