@@ -81,6 +81,57 @@ def njit(*args: Any, **options: Any) -> Any:
     return numba.njit(*args, **options)
 
 
+def _alias_analysis_to_fixpoint() -> None:
+    """Make numba's alias analysis (numba.core.ir_utils.find_potential_aliases, which decides
+    what dead-code elimination may remove) independent of the order it visits the blocks in.
+
+    It marks a variable as an alias of the function's arguments only if the variable it comes
+    from is already marked when its block is visited. After numba inlines functions into a
+    loop, a block can be visited before the block that marks its source, and then stores into
+    an argument's array through that variable are removed as dead code (numba 0.68: the
+    controllers' scratch stores in rovlab.sim.loop.run_loop_lanes). Repeating the analysis,
+    starting from what the previous pass marked, until nothing is added fixes it; it only ever
+    keeps more code alive."""
+    from numba.core import ir_utils
+
+    if getattr(ir_utils.find_potential_aliases, "_rovlab_fixpoint", False):
+        return
+    once = ir_utils.find_potential_aliases
+
+    def to_fixpoint(blocks, args, typemap, func_ir, alias_map=None, arg_aliases=None):
+        while True:
+            before = None if arg_aliases is None else len(arg_aliases)
+            alias_map, arg_aliases = once(blocks, args, typemap, func_ir, alias_map, arg_aliases)
+            if before is not None and len(arg_aliases) == before:
+                return alias_map, arg_aliases
+
+    to_fixpoint._rovlab_fixpoint = True  # type: ignore[attr-defined]
+    ir_utils.find_potential_aliases = to_fixpoint
+
+
+def aliases_its_arguments(*callables: Any) -> None:
+    """Tell numba that what these callables return (NamedTuples of arrays built inside compiled
+    code: the lanes' views of a Monte Carlo's stacked components, rovlab.sim.loop) shares the
+    arrays of their arguments. numba's dead-code elimination only keeps a store into an array
+    it can trace back to the function's arguments; a store into ``tup.field`` of a tuple built
+    by a call was removed as dead (numba 0.68: run_loop_lanes lost every log write and the
+    controllers' scratch). Nothing to do without numba."""
+    if _without_numba:
+        return
+    from numba.core import ir_utils
+
+    _alias_analysis_to_fixpoint()
+
+    def alias(lhs: str, args: list[Any], alias_map: dict[str, set[str]], arg_aliases: set[str]) -> None:
+        # as if it were one of the function's arguments: numba visits the blocks in no particular
+        # order, so whether the call's own arguments are known to alias an argument yet is luck
+        arg_aliases.add(lhs)
+
+    for fn in callables:
+        target = getattr(fn, "py_func", fn)
+        ir_utils.alias_func_extensions[(target.__name__, target.__module__)] = alias
+
+
 def without_numba() -> bool:
     """Whether this process runs without numba (:func:`run_without_numba` took effect)."""
     return bool(_without_numba)

@@ -158,18 +158,31 @@ def _wait_for_build(name: str) -> str:
     return (ready / f"{name}.log").read_text()
 
 
+def _lanes_module() -> str:
+    from rovlab.sim.runner import lane_arguments, reseed
+
+    prep = prepare(load_scenario("step-process-model"))
+    args, lanes, _ = lane_arguments([reseed(prep, 0), reseed(prep, 1)])
+    return prebuilt.module_name(prebuilt.describe(prebuilt.flatten((*args, lanes))[1]), "run_loop_lanes")
+
+
 def _monte_carlo(folder) -> dict:
     mc = json.loads((folder / "monte_carlo" / "metrics.json").read_text())["monte_carlo"]
-    for timing in ("wall_time_s", "vehicle_steps_per_s"):
+    for timing in ("wall_time_s", "vehicle_steps_per_s", "runs_in_lanes"):
         mc.pop(timing)
     return mc
+
+
+def _in_lanes(folder) -> int:
+    return json.loads((folder / "monte_carlo" / "metrics.json").read_text())["monte_carlo"]["runs_in_lanes"]
 
 
 @pytest.mark.skipif(not (shutil.which("gcc") or shutil.which("cc")), reason="building needs a C compiler")
 def test_first_run_builds_the_loop_then_runs_it_without_numba(tmp_path):
     cache = tmp_path / "cache"
     name = prebuilt.module_name(prebuilt.describe(prebuilt.flatten(_arguments())[1]))
-    (Path(os.environ["NUMBA_CACHE_DIR"]) / "rovlab-ready" / f"{name}.log").unlink(missing_ok=True)  # an earlier one
+    for earlier in (name, _lanes_module()):  # logs of an earlier run of the suite
+        (Path(os.environ["NUMBA_CACHE_DIR"]) / "rovlab-ready" / f"{earlier}.log").unlink(missing_ok=True)
     status, err = _simulate(tmp_path / "jit", cache, "1")  # the JIT loop; the build starts
     assert status["code"] == 0 and status["jit_started"], err
     log = _wait_for_build(name)
@@ -191,6 +204,16 @@ def test_first_run_builds_the_loop_then_runs_it_without_numba(tmp_path):
     assert status["code"] == 0 and status["jit_started"], err
     assert _monte_carlo(tmp_path / "mc-aot") == _monte_carlo(tmp_path / "mc-jit")
     assert (tmp_path / "mc-aot" / "timeseries.csv").read_bytes() == (tmp_path / "jit" / "timeseries.csv").read_bytes()
+    # that Monte Carlo asked for the loop over lanes when it ended; once built, the runs go
+    # sixteen at a time through it (here four at a time: the pool's chunks), without numba, with
+    # the statistics of the runs one by one
+    log = _wait_for_build(_lanes_module())
+    assert "built" in log, log
+    status, err = _simulate(tmp_path / "lanes-aot", cache, "1", "--runs", "40", "--workers", "2")
+    assert status == {"code": 0, "jit_started": False, "numba": False, "scipy_linalg": False}, err
+    status, err = _simulate(tmp_path / "lanes-jit", cache, "0", "--runs", "40", "--workers", "2")
+    assert _monte_carlo(tmp_path / "lanes-aot") == _monte_carlo(tmp_path / "lanes-jit")
+    assert _in_lanes(tmp_path / "lanes-aot") >= 36 and _in_lanes(tmp_path / "lanes-jit") == 0
     # a marker pointing at a module that loads but does not take the run's arguments (here: the
     # observer plant's combination pointed at the process plant's module): no interpreted loop,
     # the command says so and starts again with the JIT loop

@@ -29,7 +29,18 @@ def wrap(a: np.ndarray | float) -> np.ndarray:
     return a - TWO_PI * np.ceil((a - np.pi) / TWO_PI)
 
 
-_SMALL = 0.1  # |d| up to which cos_sin_small uses its series: the first omitted terms are < 3e-17
+SMALL_ANGLE = 0.1  # |d| up to which cos_sin_small uses its series: the first omitted terms are < 3e-17
+
+
+@njit(cache=True, inline="always")
+def cos_sin_series(d: float) -> tuple[float, float]:
+    """(cos d, sin d) by their Taylor series to d^8 and d^9, whatever d: exact to rounding for
+    |d| <= 0.1 only. Without a branch, so a loop over many angles is vectorised (the lanes of
+    rovlab.sim.plant, which check |d| <= 0.1 themselves and redo any step where it fails)."""
+    d2 = d * d
+    c = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 * (1.0 / 720.0 - d2 * (1.0 / 40320.0))))
+    s = d * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 * (1.0 / 5040.0 - d2 * (1.0 / 362880.0)))))
+    return c, s
 
 
 @njit(cache=True, inline="always")
@@ -41,9 +52,6 @@ def cos_sin_small(d: float) -> tuple[float, float]:
     sin(psi + d) = s cos d + c sin d then cost a few multiplications instead of a sine and a
     cosine (about 14 ns together here, and on the critical path of a Runge-Kutta step).
     """
-    if not abs(d) <= _SMALL:  # (NaN too)
+    if not abs(d) <= SMALL_ANGLE:  # (NaN too)
         return math.cos(d), math.sin(d)
-    d2 = d * d
-    c = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 * (1.0 / 720.0 - d2 * (1.0 / 40320.0))))
-    s = d * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 * (1.0 / 5040.0 - d2 * (1.0 / 362880.0)))))
-    return c, s
+    return cos_sin_series(d)

@@ -21,6 +21,15 @@ Slot functions (all compiled; the arrays are float64 unless noted):
     integrate from t_k to t_k + h with the wrench held: ``tau_cmd`` (4: X, Y, Z, N) is what the
     allocation asked of the thrusters, ``tau_real`` (4) what their PWM commands really give;
     ``drive`` holds the run's noise draws (row = this chunk's step index).
+``plant_advance_lanes(plants, drives, row, lanes)``
+    the same for several runs at once (a Monte Carlo's lanes, rovlab.sim.loop.run_loop_lanes):
+    ``plants`` is the runs' plants stacked (:func:`stacked`: each state field with a leading
+    lane axis, the constants shared), ``drives`` their drives stacked the same way
+    (rovlab.sim.loop.lane_drive), and ``lanes`` (rovlab.sim.loop.Lanes) holds each lane's
+    tau_cmd and tau_real (LANES x 4), which lanes are running (``active``) and a scratch array.
+    A plant may register a kernel that advances the lanes together (vectorised); without one,
+    each running lane is advanced by its ``plant_advance`` (on :func:`lane_of` the stack).
+    Either way every lane gets exactly the numbers of its run alone.
 ``estimator_correct(est, t, y, present, rep)``
     correct with the samples y (m) that arrived (present, bool); fill ``rep`` (m x N_REP of
     rovlab.estimation.fusion). Every estimator has the fields ``x`` (n), ``P`` (n x n) and
@@ -60,10 +69,15 @@ ANGLES = frozenset({"psi"})
 REFERENCE = ("x", "y", "z", "psi")
 WRENCH = ("X", "Y", "Z", "N")
 
+# Runs a Monte Carlo advances together (rovlab.sim.loop.run_loop_lanes): sixteen float64 fill
+# two AVX-512 vectors (four AVX2 ones), and the lanes loop is compiled for this one count.
+LANES = 16
+LANE_SCRATCH_ROWS = 64  # rows of LANES float64 of scratch a plant's lanes kernel may use (rovlab.sim.loop.Lanes)
+
 _STATE: dict[type, tuple[str, ...]] = {}  # component class -> its state fields
 _DRAWS: dict[type, int] = {}  # plant class -> standard normal draws per integration step
 _REGISTRY: dict[str, dict[type, Callable[..., Any]]] = {
-    "plant_truth": {}, "plant_advance": {},
+    "plant_truth": {}, "plant_advance": {}, "plant_advance_lanes": {},
     "estimator_correct": {}, "estimator_predict": {},
     "controller_step": {}, "controller_actuated": {},
 }
@@ -82,15 +96,20 @@ def _register_state(cls: type, state: tuple[str, ...], required: tuple[str, ...]
         if f not in fields:
             raise TypeError(f"{cls.__name__} has no field {f!r} (its fields: {', '.join(fields)})")
     _STATE[cls] = tuple(state)
+    _jit.aliases_its_arguments(cls)  # lane_of builds the class in compiled code (a lane's views)
 
 
-def register_plant(cls: type, *, state: tuple[str, ...], draws: int, truth: Callable, advance: Callable) -> None:
+def register_plant(cls: type, *, state: tuple[str, ...], draws: int, truth: Callable, advance: Callable,
+                   advance_lanes: Callable | None = None) -> None:
     """Bind a plant class: truth(plant, truth), advance(plant, drive, row, tau_cmd, tau_real);
-    ``draws`` standard normal numbers per integration step come in drive.plant_normals."""
+    ``draws`` standard normal numbers per integration step come in drive.plant_normals;
+    ``advance_lanes(plants, drives, row, lanes)`` optionally advances a Monte Carlo's lanes
+    together (by default each lane is advanced alone)."""
     _register_state(cls, state, ())
     _DRAWS[cls] = int(draws)
     _REGISTRY["plant_truth"][cls] = truth
     _REGISTRY["plant_advance"][cls] = advance
+    _REGISTRY["plant_advance_lanes"][cls] = advance_lanes if advance_lanes is not None else _lane_by_lane
 
 
 def register_estimator(cls: type, *, state: tuple[str, ...], correct: Callable, predict: Callable) -> None:
@@ -110,6 +129,14 @@ def register_controller(cls: type, *, state: tuple[str, ...], step: Callable,
 
 def _no_actuated(ctrl, t, tau_demanded, tau_achieved):  # pragma: no cover - compiled
     return None
+
+
+def _lane_by_lane(plants, drives, row, lanes):
+    """plant_advance_lanes of a plant without a lanes kernel: each running lane alone
+    (rovlab.sim.loop.lane_by_lane; this is its interpreted entry)."""
+    from rovlab.sim.loop import lane_by_lane
+
+    return lane_by_lane(plants, drives, row, lanes)
 
 
 # --------------------------------------------------------------------------------------------
@@ -137,6 +164,25 @@ def fresh(component: Any) -> Any:
 def state_of(component: Any) -> dict[str, np.ndarray]:
     """A copy of the component's state, by field name."""
     return {f: np.array(getattr(component, f), copy=True) for f in state_fields(component)}
+
+
+def stacked(components: Any) -> Any:
+    """Runs' components of one class stacked for the lanes of a Monte Carlo: the first one's
+    constants (the runs must share them) and each state field with a leading lane axis (lane i
+    is a copy of components[i]'s state). :func:`lane_of` gives a lane back as a component."""
+    first = components[0]
+    fields = state_fields(first)
+    for c in components[1:]:
+        if type(c) is not type(first):
+            raise TypeError(f"stacked: {type(c).__name__} among {type(first).__name__}")
+    return first._replace(**{f: np.ascontiguousarray(np.stack([np.asarray(getattr(c, f)) for c in components]))
+                             for f in fields})
+
+
+def lane_of(stack: Any, lane: int) -> Any:
+    """Lane ``lane`` of :func:`stacked` components: the component whose state fields are views
+    of that lane (compiled code builds it in registers, without copying)."""
+    return stack._replace(**{f: getattr(stack, f)[lane] for f in state_fields(stack)})
 
 
 def restore(component: Any, state: dict[str, np.ndarray]) -> list[str]:
@@ -175,6 +221,10 @@ def plant_truth(plant, truth):
 
 def plant_advance(plant, drive, row, tau_cmd, tau_real):
     return _bound("plant_advance", plant)(plant, drive, row, tau_cmd, tau_real)
+
+
+def plant_advance_lanes(plants, drives, row, lanes):
+    return _bound("plant_advance_lanes", plants)(plants, drives, row, lanes)
 
 
 def estimator_correct(est, t, y, present, rep):
@@ -221,6 +271,28 @@ def _install_overloads() -> None:
         return lambda plant, drive, row, tau_cmd, tau_real: fn(plant, drive, row, tau_cmd, tau_real)
 
 
+    @overload(plant_advance_lanes)  # no cache: a non-rovlab component must not enter a shared cache index
+    def _ol_plant_advance_lanes(plants, drives, row, lanes):
+        fn = _lookup("plant_advance_lanes", plants)
+        if fn is _lane_by_lane:
+            from rovlab.sim.loop import lane_by_lane
+
+            return lambda plants, drives, row, lanes: lane_by_lane(plants, drives, row, lanes)
+        return lambda plants, drives, row, lanes: fn(plants, drives, row, lanes)
+
+
+    @overload(lane_of, inline="always")
+    def _ol_lane_of(stack, index):
+        cls = getattr(stack, "instance_class", None)
+        if cls not in _STATE:
+            raise TypingError(f"lane_of: {stack} is not a registered component")
+        state = _STATE[cls]
+        parts = ", ".join(f"stack.{f}[index]" if f in state else f"stack.{f}" for f in cls._fields)
+        namespace: dict[str, Any] = {"cls": cls}
+        exec(f"def lane_of_impl(stack, index):\n    return cls({parts})\n", namespace)
+        return namespace["lane_of_impl"]
+
+
     @overload(estimator_correct, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
     def _ol_estimator_correct(est, t, y, present, rep):
         fn = _lookup("estimator_correct", est)
@@ -249,6 +321,7 @@ def _install_overloads() -> None:
 
 if not _jit.without_numba():
     _install_overloads()
+    _jit.aliases_its_arguments(lane_of)
 
 
 # --------------------------------------------------------------------------------------------

@@ -252,6 +252,7 @@ def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path,
     summary["interrupted"] = len(done) < runs
     n_plant = len(result.columns["time_s"]) * int(result.meta["sample_time_s"] / result.meta["plant_step_s"] + 0.5)
     summary["vehicle_steps_per_s"] = len(done) * n_plant / wall if wall > 0 else None
+    summary["runs_in_lanes"] = sum(1 for r in done if r.get("lanes"))  # through the loop over lanes (built)
     write_monte_carlo(out / "monte_carlo", result.scenario.name, summary, done, result.columns["time_s"], notes=notes,
                       figures=figures)
     metrics = dict(metrics)
@@ -264,6 +265,7 @@ def _print_mc(summary: dict[str, Any]) -> None:
     n = summary["runs"]
     print(f"Monte Carlo: {n} runs in {summary['wall_time_s']:.2f} s"
           + (f" ({summary['vehicle_steps_per_s'] / 1e6:.1f} M vehicle-steps/s)" if summary.get("vehicle_steps_per_s") else "")
+          + (f", {summary['runs_in_lanes']} of them in lanes" if summary.get("runs_in_lanes") else "")
           + (" -- interrupted, partial results kept" if summary.get("interrupted") else ""))
     nees = summary.get("nees")
     if nees:

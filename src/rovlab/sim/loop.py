@@ -31,16 +31,20 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rovlab._jit import WITHOUT_NRT, njit
+from rovlab._jit import WITHOUT_NRT, aliases_its_arguments, njit
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
+    LANE_SCRATCH_ROWS,
+    LANES,
     N_TRUTH,
     TRUTH_INDEX,
     controller_actuated,
     controller_step,
     estimator_correct,
     estimator_predict,
+    lane_of,
     plant_advance,
+    plant_advance_lanes,
     plant_truth,
 )
 from rovlab.estimation.fusion import CH_REASON, CH_STATUS, EVENT_USED, N_REP, REP_EVENT, REP_INNOV, REP_S
@@ -143,46 +147,38 @@ def _nees(err, P, idx, L):
     return total
 
 
-@njit(cache=True, **WITHOUT_NRT)
-def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive, logs, work):
-    """Run control steps k0 .. k1-1 (t_k = k h). The components' state arrays are advanced in
-    place; ``drive`` and ``logs`` are indexed by row = k - k0. Returns the number of rows done:
-    k1 - k0, or fewer if the plant's true state stopped being finite (or beyond 1e9), in which
-    case the run stops there rather than log garbage. ``work`` holds its scratch arrays
-    (:func:`new_work`).
-
-    nav_of (int64, n_x): the TRUTH index each estimator state estimates; nees_idx (int64): the
-    estimator states whose error enters the NEES (those the plant has a truth for); angle states
-    (psi) have their errors wrapped.
-    """
+@njit(cache=True, inline="always")
+def _to_plant(k, row, t, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive, logs, work):
+    """Steps 1-6 of control step k (module docstring), up to the plant's advance: the truth, the
+    samples, the estimator's correction, the controller, the allocation and the estimator's
+    prediction, each logged at ``row``. The wrench the plant is to feel is left in
+    work.tau_cmd / work.tau_real. Returns False, logging nothing, when the plant's true state is
+    no longer finite (or beyond 1e9)."""
     n = est.x.shape[0]
     m = sensors.quantity.shape[0]
     nt = act.rows.shape[0]
     n_nees = nees_idx.shape[0]
     rep, y, present, truth, nav, err, chol = work.rep, work.y, work.present, work.truth, work.nav, work.err, work.chol
     tau, tau_cmd, tau_real, pwm = work.tau, work.tau_cmd, work.tau_real, work.pwm
-    nav[:] = 0.0
-    # bound once: array fields read in the loop body
     x = est.x
     P = est.P
     ch = est.ch
     cstate = ctrl.state
-    refs = drive.refs
-    normals = drive.sensor_normals
-    dropout = drive.dropout
+    # Every array written is bound to a name first: written as logs.truth[row, i] = ..., the
+    # stores were lost when this function was inlined into run_loop_lanes (numba 0.68), whose
+    # logs are built in the loop (lane views), not passed in.
     log_truth, log_y, log_status, log_reason = logs.truth, logs.y, logs.status, logs.reason
     log_x, log_P = logs.x, logs.P
     log_wrench, log_pwm, log_cons, log_ctrl = logs.wrench, logs.pwm, logs.cons, logs.ctrl
-    for k in range(k0, k1):
-        row = k - k0
-        t = k * h
-        # -- truth and sensors at t_k ---------------------------------------------------------
-        plant_truth(plant, truth)
+    # -- truth and sensors at t_k ---------------------------------------------------------
+    plant_truth(plant, truth)
+    finite = True
+    for i in range(N_TRUTH):
+        finite = finite and abs(truth[i]) < _DIVERGED
+    if finite:  # else the plant diverged (absurd parameters or forces): stop, rows 0..row-1 hold
         for i in range(N_TRUTH):
-            if not abs(truth[i]) < _DIVERGED:
-                return row  # the plant diverged (absurd parameters or forces): stop, rows 0..row-1 hold
             log_truth[row, i] = truth[i]
-        sample_sensors(sensors, truth, k, normals, dropout, row, y, present)
+        sample_sensors(sensors, truth, k, drive.sensor_normals, drive.dropout, row, y, present)
         for j in range(m):
             log_y[row, j] = y[j]
         # -- estimator: correct -------------------------------------------------------------
@@ -209,7 +205,7 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
         # -- controller, allocation and thrusters ---------------------------------------------
         for i in range(n):
             nav[nav_of[i]] = x[i]
-        controller_step(ctrl, t, nav, refs[row], tau)
+        controller_step(ctrl, t, nav, drive.refs[row], tau)
         actuate(act, tau, tau_cmd, tau_real, pwm)
         for i in range(nt):
             log_pwm[row, i] = pwm[i]
@@ -218,10 +214,139 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
             log_wrench[row, 4 + i] = tau[i]
         for i in range(cstate.shape[0]):
             log_ctrl[row, i] = cstate[i]
-        # -- estimator: predict; controller: what was achieved; plant to t_k+1 -----------------
+        # -- estimator: predict; controller: what was achieved ---------------------------------
         estimator_predict(est, t, tau_cmd)
         controller_actuated(ctrl, t, tau, tau_cmd)
-        plant_advance(plant, drive, row, tau_cmd, tau_real)
+    return finite
+
+
+@njit(cache=True, **WITHOUT_NRT)
+def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive, logs, work):
+    """Run control steps k0 .. k1-1 (t_k = k h). The components' state arrays are advanced in
+    place; ``drive`` and ``logs`` are indexed by row = k - k0. Returns the number of rows done:
+    k1 - k0, or fewer if the plant's true state stopped being finite (or beyond 1e9), in which
+    case the run stops there rather than log garbage. ``work`` holds its scratch arrays
+    (:func:`new_work`).
+
+    nav_of (int64, n_x): the TRUTH index each estimator state estimates; nees_idx (int64): the
+    estimator states whose error enters the NEES (those the plant has a truth for); angle states
+    (psi) have their errors wrapped.
+    """
+    work.nav[:] = 0.0
+    for k in range(k0, k1):
+        row = k - k0
+        if not _to_plant(k, row, k * h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive, logs, work):
+            return row
+        # -- the plant to t_k+1 (step 7) ---------------------------------------------------
+        plant_advance(plant, drive, row, work.tau_cmd, work.tau_real)
+    return k1 - k0
+
+
+class Lanes(NamedTuple):
+    """What :func:`run_loop_lanes` keeps per lane besides the components (:func:`new_lanes`)."""
+
+    tau_cmd: np.ndarray  # (LANES, 4) the wrench each lane's allocation achieved this step
+    tau_real: np.ndarray  # (LANES, 4) the wrench each lane's thrusters really give
+    active: np.ndarray  # (LANES) bool: the lane is running (False: its plant diverged, or no run in it)
+    done: np.ndarray  # (LANES) int64: rows each lane did (set when it stops or the chunk ends)
+    scratch: np.ndarray  # (LANE_SCRATCH_ROWS * LANES) the plant's lanes kernel's work (rovlab.sim.plant)
+
+
+def new_lanes(used: int) -> Lanes:
+    """Lanes with the first ``used`` of LANES running."""
+    active = np.zeros(LANES, dtype=np.bool_)
+    active[:used] = True
+    return Lanes(np.zeros((LANES, 4)), np.zeros((LANES, 4)), active, np.zeros(LANES, dtype=np.int64),
+                 np.zeros(LANE_SCRATCH_ROWS * LANES))
+
+
+def stacked_drive(drives: list[Drive]) -> Drive:
+    """The drives of runs that differ only by their seed, stacked for the lanes: the random draws
+    with a leading lane axis, the schedule (drop-outs, references, disturbances) the first's."""
+    first = drives[0]
+    return first._replace(plant_normals=np.stack([d.plant_normals for d in drives]),
+                          bias_normals=np.stack([d.bias_normals for d in drives]),
+                          sensor_normals=np.stack([d.sensor_normals for d in drives]))
+
+
+@njit(cache=True, inline="always")
+def lane_drive(drive_stack, drive_lane):
+    """Lane ``drive_lane`` of a :func:`stacked_drive`, as one run's Drive (views)."""
+    return Drive(drive_stack.plant_normals[drive_lane], drive_stack.bias_normals[drive_lane],
+                 drive_stack.sensor_normals[drive_lane], drive_stack.dropout, drive_stack.refs,
+                 drive_stack.heave_force, drive_stack.pset)
+
+
+@njit(cache=True, inline="always")
+def lane_logs(logs_stack, logs_lane):
+    """Lane ``logs_lane`` of stacked logs (:func:`new_stacked_logs`), as one run's logs (views)."""
+    return Logs(logs_stack.truth[logs_lane], logs_stack.y[logs_lane], logs_stack.status[logs_lane],
+                logs_stack.reason[logs_lane], logs_stack.x[logs_lane], logs_stack.P[logs_lane],
+                logs_stack.wrench[logs_lane], logs_stack.pwm[logs_lane], logs_stack.cons[logs_lane],
+                logs_stack.ctrl[logs_lane])
+
+
+def new_stacked_logs(lanes: int, n: int, m: int, n_x: int, n_thrusters: int, n_ctrl_state: int) -> Logs:
+    return Logs(np.empty((lanes, n, N_TRUTH)), np.empty((lanes, n, m)), np.empty((lanes, n, m)),
+                np.empty((lanes, n, m)), np.empty((lanes, n, n_x)), np.empty((lanes, n, n_x, n_x)),
+                np.empty((lanes, n, N_WRENCH_LOG)), np.empty((lanes, n, n_thrusters)), np.empty((lanes, n, 3)),
+                np.empty((lanes, n, n_ctrl_state)))
+
+
+aliases_its_arguments(Drive, Logs, lane_drive, lane_logs)  # views built in compiled code (rovlab._jit)
+
+
+@njit(cache=True)
+def lane_by_lane(plants, drives, row, lanes):
+    """plant_advance_lanes of a plant without a lanes kernel: each running lane by its
+    plant_advance."""
+    for lane in range(lanes.active.shape[0]):
+        if lanes.active[lane]:
+            plant_advance(lane_of(plants, lane), lane_drive(drives, lane), row, lanes.tau_cmd[lane],
+                          lanes.tau_real[lane])
+
+
+@njit(cache=True, **WITHOUT_NRT)
+def run_loop_lanes(k0, k1, h, plants, sensors, ests, ctrls, act, nav_of, nees_idx, drives, log_stack, work, lanes):
+    """:func:`run_loop` for up to LANES runs at once (a Monte Carlo's lanes) that differ only by
+    their seed: ``plants``, ``ests`` and ``ctrls`` are the runs' components stacked
+    (rovlab.core.components.stacked), ``drives`` their drives (:func:`stacked_drive`) and
+    ``log_stack`` their logs (:func:`new_stacked_logs`), lane i being run i; the sensors, the
+    actuators and ``work`` are shared (their arrays hold nothing from one step to the next).
+    Each step does steps 1-6 lane by lane, then advances every lane's plant together
+    (plant_advance_lanes: one vectorised RK4 for the process plant), and every lane gets
+    exactly the logs of its run through run_loop. Lanes whose ``lanes.active`` is False are not
+    touched; a lane whose plant diverges stops there. ``lanes.done`` receives the rows each lane
+    did; returns the rows done by the longest.
+
+    (No argument is named like one of _to_plant's that it is not: numba 0.68's inliner confused
+    this loop's stacked ``logs`` with _to_plant's ``logs`` and lost every log write.)"""
+    n_lanes = lanes.active.shape[0]
+    active = lanes.active
+    done = lanes.done
+    work.nav[:] = 0.0
+    for k in range(k0, k1):
+        row = k - k0
+        t = k * h
+        running = 0
+        for lane in range(n_lanes):
+            if active[lane]:
+                ok = _to_plant(k, row, t, lane_of(plants, lane), sensors, lane_of(ests, lane), lane_of(ctrls, lane),
+                               act, nav_of, nees_idx, lane_drive(drives, lane), lane_logs(log_stack, lane), work)
+                if ok:
+                    for i in range(4):
+                        lanes.tau_cmd[lane, i] = work.tau_cmd[i]
+                        lanes.tau_real[lane, i] = work.tau_real[i]
+                    running += 1
+                else:
+                    active[lane] = False
+                    done[lane] = row
+        if running == 0:
+            return row
+        plant_advance_lanes(plants, drives, row, lanes)
+    for lane in range(n_lanes):
+        if active[lane]:
+            done[lane] = k1 - k0
     return k1 - k0
 
 
@@ -276,9 +401,12 @@ class explain_allocation:
 run_loop_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(run_loop, "py_func", run_loop))
 
 
-def loop_for(*components: object):
-    """The loop to call for these components: the disk-cached one when every component class is
-    rovlab's own, else the per-process copy."""
+run_loop_lanes_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(run_loop_lanes, "py_func", run_loop_lanes))
+
+
+def loop_for(*components: object, lanes: bool = False):
+    """The loop to call for these components (``lanes``: :func:`run_loop_lanes`): the
+    disk-cached one when every component class is rovlab's own, else the per-process copy."""
     if all(type(c).__module__.startswith("rovlab.") for c in components):
-        return run_loop
-    return run_loop_uncached
+        return run_loop_lanes if lanes else run_loop
+    return run_loop_lanes_uncached if lanes else run_loop_uncached

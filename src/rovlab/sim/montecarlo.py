@@ -7,6 +7,12 @@ Runs go to a pool of forked worker processes (stdlib ``concurrent.futures``; the
 and runs the first seed before the fork, so the workers start with the design and the compiled
 loop ready) or, with ``backend="dask"``, to a Dask cluster. Workers return only the metrics and
 the NEES/NIS series, not the full logs.
+
+Within a process, runs of a scenario without distributions go through the loop over lanes
+(rovlab.sim.loop.run_loop_lanes) LANES at a time once it is built ahead of time: the plants of
+sixteen runs are integrated together in vector instructions, with exactly the numbers of each
+run alone. Until it is built (in the background, after the first Monte Carlo that could use
+it) the runs go one by one.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from rovlab.core.components import LANES
 from rovlab.sim import metrics as mx
 
 
@@ -47,18 +54,57 @@ class Campaign:
 
     def run(self, seed: int) -> dict[str, Any]:
         """One run: its metrics (metrics.json of the run) and its NEES/NIS series."""
-        from rovlab.sim.runner import run_prepared, summarise
+        from rovlab.sim.runner import run_prepared
 
-        result = run_prepared(self.prepared(seed))
-        metrics = summarise(result)
-        # flattened here, in the worker, rather than by summarise_runs in the parent after the runs
-        return {"seed": seed, "metrics": metrics, "nees": result.nees, "nis": result.nis, "flat": _flatten(metrics)}
+        return _outcome(seed, run_prepared(self.prepared(seed)))
+
+    def run_group(self, seeds: Sequence[int]) -> list[dict[str, Any]]:
+        """The runs of up to LANES seeds (:meth:`run` of each, in order): together through the loop
+        over lanes when it is built and the scenario has no distributions, else one by one."""
+        from rovlab.sim.runner import result_of, run_lanes
+
+        if self.template is not None and len(seeds) >= 2:
+            preps = [self.prepared(s) for s in seeds]
+            started = time.time()
+            logs = run_lanes(preps, request=False)
+            if logs is not None:
+                return [_outcome(s, result_of(prep, lg, started), lanes=True) for s, prep, lg in zip(seeds, preps, logs)]
+        return [self.run(s) for s in seeds]
+
+    def run_all(self, seeds: Sequence[int]) -> list[dict[str, Any]]:
+        """:meth:`run_group` over the seeds, LANES at a time."""
+        from rovlab.core.components import LANES
+
+        out: list[dict[str, Any]] = []
+        for i in range(0, len(seeds), LANES):
+            out.extend(self.run_group(seeds[i:i + LANES]))
+        return out
+
+    def request_lanes(self) -> str | None:
+        """Start building the loop over lanes for this scenario in the background (once; nothing
+        if it is built, disabled or the scenario has distributions)."""
+        from rovlab.sim.runner import request_lanes, reseed
+
+        if self.template is None:
+            return None
+        return request_lanes([reseed(self.template, s) for s in (0, 1)])
+
+
+def _outcome(seed: int, result: Any, *, lanes: bool = False) -> dict[str, Any]:
+    """What a worker returns of a run: its metrics (metrics.json of the run), flattened for the
+    statistics, its NEES/NIS series, and whether it ran in lanes."""
+    from rovlab.sim.runner import summarise
+
+    metrics = summarise(result)
+    # flattened here, in the worker, rather than by summarise_runs in the parent after the runs
+    return {"seed": seed, "metrics": metrics, "nees": result.nees, "nis": result.nis, "flat": _flatten(metrics),
+            "lanes": lanes}
 
 
 def _chunk(data: Mapping[str, Any], file: str, seeds: Sequence[int]) -> list[dict[str, Any]]:
     """A chunk of runs where nothing is shared with the caller's process (a Dask worker)."""
     campaign = Campaign(data, file, seeds[0])
-    return [campaign.run(s) for s in seeds]
+    return campaign.run_all(seeds)
 
 
 _worker: Campaign | None = None  # the campaign of a pool worker process (set by _init_worker)
@@ -74,7 +120,7 @@ def _init_worker(campaign: Campaign | None, data: Mapping[str, Any], file: str, 
 def _worker_chunk(seeds: Sequence[int]) -> list[dict[str, Any]]:
     if _worker is None:
         raise RuntimeError("a Monte Carlo pool worker was started without its campaign (_init_worker)")
-    return [_worker.run(s) for s in seeds]
+    return _worker.run_all(seeds)
 
 
 def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, workers: int | None = None,
@@ -101,12 +147,13 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     out: list[dict[str, Any]] = []
     if workers == 1 or n == 1:
         try:
-            for i, s in enumerate(seeds):
-                out.append(campaign.run(s))
+            for i in range(0, n, LANES):
+                out.extend(campaign.run_group(seeds[i:i + LANES]))
                 if progress:
-                    progress(i + 1, n)
+                    progress(len(out), n)
         except KeyboardInterrupt:  # keep what finished, as the parallel path does
             print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
+        campaign.request_lanes()
         return out
     # the first run here: it loads the compiled loop before the fork, so no worker pays for it
     results: dict[int, dict[str, Any]] = {}
@@ -143,6 +190,7 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
         print(f"\ninterrupted: keeping {done} of {n} runs", file=sys.stderr)
         return [results[s] for s in seeds if s in results]
     pool.shutdown()
+    campaign.request_lanes()  # after the runs, not during them: the build takes a core for a minute
     return [results[s] for s in seeds]
 
 
@@ -156,14 +204,17 @@ def _stop(pool: ProcessPoolExecutor, futures: list) -> None:
     pool.shutdown(wait=False, cancel_futures=True)
 
 
-def _guided_chunks(seeds: Sequence[int], workers: int, *, largest: int = 100, smallest: int = 1) -> list[list[int]]:
+def _guided_chunks(seeds: Sequence[int], workers: int, *, largest: int = 96, smallest: int = 1) -> list[list[int]]:
     """Chunks of seeds for the pool, each a share of what is left (guided scheduling): long chunks
     first (few round trips), short ones at the end, so that no worker idles while another finishes
-    a long last chunk; the progress bar moves throughout."""
+    a long last chunk; the progress bar moves throughout. Chunks longer than LANES are whole
+    multiples of it (the lanes are full)."""
     out = []
     i, n = 0, len(seeds)
     while i < n:
         size = max(smallest, min(largest, (n - i) // (workers * 4)))
+        if size > LANES:
+            size -= size % LANES
         out.append(list(seeds[i:i + size]))
         i += size
     return out

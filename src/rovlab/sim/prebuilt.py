@@ -114,21 +114,25 @@ def describe(shape: tuple[Any, ...]) -> list[Any]:
             return out
 
 
-def digest(description: list[Any]) -> str:
-    """The module's key: the description and numpy's version (a module built against one numpy
-    must not be loaded by another; the folder is already per rovlab sources and CPU)."""
-    return hashlib.sha1(f"numpy {np.__version__} ".encode() + json.dumps(description).encode()).hexdigest()[:16]
+LOOPS = ("run_loop", "run_loop_lanes")  # the loops of rovlab.sim.loop that can be built
 
 
-def module_name(description: list[Any]) -> str:
-    return PREFIX + digest(description)
+def digest(description: list[Any], loop: str = "run_loop") -> str:
+    """The module's key: the loop, the description and numpy's version (a module built against
+    one numpy must not be loaded by another; the folder is already per rovlab sources and CPU)."""
+    which = "" if loop == "run_loop" else f"{loop} "
+    return hashlib.sha1(f"numpy {np.__version__} {which}".encode() + json.dumps(description).encode()).hexdigest()[:16]
+
+
+def module_name(description: list[Any], loop: str = "run_loop") -> str:
+    return PREFIX + digest(description, loop)
 
 
 # --------------------------------------------------------------------------------------------
 # Using a built loop
 # --------------------------------------------------------------------------------------------
 
-_names: dict[tuple[Any, ...], str] = {}  # shape -> module name (this process)
+_names: dict[tuple[Any, ...], str] = {}  # (loop, shape) -> module name (this process)
 _loaded: dict[str, Callable[..., Any]] = {}  # module name -> its loaded function (this process)
 _requested: set[str] = set()  # modules whose build this process asked for
 
@@ -139,18 +143,18 @@ def enabled() -> bool:
     return _aot.enabled() and not _jit.interpreting()
 
 
-def runner(args: Sequence[Any]) -> Callable[[int, int, float], int] | None:
-    """The built loop for these arguments of run_loop (after k0, k1, h), bound to them; None
-    when it is not built (or disabled, or the arguments are not plain C arrays and scalars)."""
+def runner(args: Sequence[Any], loop: str = "run_loop") -> Callable[[int, int, float], int] | None:
+    """The built ``loop`` (one of LOOPS) for these arguments (after k0, k1, h), bound to them;
+    None when it is not built (or disabled, or the arguments are not plain C arrays and scalars)."""
     if not enabled():
         return None
     flat = flatten(args)
     if flat is None:
         return None
     leaves, shape = flat
-    name = _names.get(shape)
+    name = _names.get((loop, shape))
     if name is None:
-        name = _names[shape] = module_name(describe(shape))
+        name = _names[(loop, shape)] = module_name(describe(shape), loop)
     fn = _loaded.get(name) or _load(name)  # not found yet: looked for again next time (a build may end)
     if fn is None:
         return None
@@ -203,8 +207,8 @@ def loads_for(key: str) -> bool:
     return marked is not None and (_loaded.get(marked[1]) is not None or _load(marked[1]) is not None)
 
 
-def request(args: Sequence[Any], key: str) -> str | None:
-    """Start building the loop for these arguments (the combination ``key``) in the background
+def request(args: Sequence[Any], key: str, loop: str = "run_loop") -> str | None:
+    """Start building ``loop`` for these arguments (the combination ``key``) in the background
     unless it is built, failed before, under way or disabled (once per process and
     combination); returns the build's log file when one was started or is under way."""
     from rovlab import _jit
@@ -216,7 +220,7 @@ def request(args: Sequence[Any], key: str) -> str | None:
     if flat is None or where is None:
         return None
     description = describe(flat[1])
-    name = module_name(description)
+    name = module_name(description, loop)
     if name in _requested:
         return None
     _requested.add(name)
@@ -225,7 +229,7 @@ def request(args: Sequence[Any], key: str) -> str | None:
     try:
         where.mkdir(parents=True, exist_ok=True)
         plan = where / f"{name}.json"
-        _write(plan, json.dumps(description))
+        _write(plan, json.dumps({"loop": loop, "arguments": description}))
     except OSError:
         return None
     return _jit.start_detached(name, ["rovlab.sim.prebuilt", "build", "--plan", str(plan), "--key", key])
@@ -235,7 +239,7 @@ def request(args: Sequence[Any], key: str) -> str | None:
 # Building
 # --------------------------------------------------------------------------------------------
 
-def wrapper_source(description: list[Any]) -> tuple[str, dict[str, type], list[str]]:
+def wrapper_source(description: list[Any], loop: str = "run_loop") -> tuple[str, dict[str, type], list[str]]:
     """(source of run_flat, the classes it names, the leaf specs in order) for a description."""
     import importlib
 
@@ -261,7 +265,7 @@ def wrapper_source(description: list[Any]) -> tuple[str, dict[str, type], list[s
     args = [expr(item) for item in description]
     params = "".join(f", a{i}" for i in range(len(specs)))
     source = (f"def {EXPORT}(k0, k1, h{params}):\n"
-              f"    return run_loop(k0, k1, h, {', '.join(args)})\n")
+              f"    return {loop}(k0, k1, h, {', '.join(args)})\n")
     return source, classes, specs
 
 
@@ -277,21 +281,23 @@ def _numba_type(spec: str) -> Any:
     return types.Array(from_dtype(np.dtype(dtype)), int(ndim), "C", readonly=access == "r")
 
 
-def build(description: list[Any], where: Path | None = None) -> Path:
-    """Compile the flat wrapper of ``description`` with the loop into an extension module."""
+def build(description: list[Any], where: Path | None = None, loop: str = "run_loop") -> Path:
+    """Compile the flat wrapper of ``description`` with ``loop`` into an extension module."""
     from numba.core import types
 
-    from rovlab.sim.loop import run_loop
+    from rovlab.sim import loop as loops
 
+    if loop not in LOOPS:
+        raise ValueError(f"cannot build {loop!r}: expected one of {', '.join(LOOPS)}")
     where = where or _aot.folder()
     if where is None:
         raise RuntimeError("rovlab's sources cannot be read: no cache folder to build into")
-    source, classes, specs = wrapper_source(description)
-    namespace: dict[str, Any] = {"run_loop": run_loop, **classes}
-    exec(compile(source, f"<rovlab.sim.prebuilt {module_name(description)}>", "exec"), namespace)
+    source, classes, specs = wrapper_source(description, loop)
+    namespace: dict[str, Any] = {loop: getattr(loops, loop), **classes}
+    name = module_name(description, loop)
+    exec(compile(source, f"<rovlab.sim.prebuilt {name}>", "exec"), namespace)
     signature = types.int64(types.int64, types.int64, types.float64, *(_numba_type(s) for s in specs))
-    return _aot.compile_module(where, module_name(description), EXPORT, namespace[EXPORT], signature,
-                               release_gil=False)
+    return _aot.compile_module(where, name, EXPORT, namespace[EXPORT], signature, release_gil=False)
 
 
 def simulation(scenario: str, design: str | None = None) -> Any:
@@ -321,6 +327,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--config", default=None, help="filter/controller configuration (default: the scenario's)")
     p.add_argument("--plan", default=None, help="a plan file written by a run (the background build)")
     p.add_argument("--force", action="store_true", help="build again even if it is built")
+    p.add_argument("--lanes", action="store_true",
+                   help="the Monte Carlo's loop over lanes of runs (rovlab.sim.loop.run_loop_lanes) instead of one run's")
     p.add_argument("--key", default=None, help="the combination of components (rovlab._jit.loop_key) of --plan")
     p.add_argument("--lock", default=None, help="lock file to remove when done (the background build)")
     args = p.parse_args(argv)
@@ -335,17 +343,28 @@ def main(argv: list[str] | None = None) -> int:
             except OSError:
                 pass
         key = args.key
+        loop = "run_loop_lanes" if args.lanes else "run_loop"
         if args.plan:
-            description = json.loads(Path(args.plan).read_text())
+            plan = json.loads(Path(args.plan).read_text())
+            loop, description = plan["loop"], plan["arguments"]
         else:
             sim = simulation(args.scenario, args.config)
             key = sim.prep.loop_key
-            flat = flatten(sim.loop_arguments())
+            if args.lanes:
+                from rovlab.sim.runner import lane_arguments, reseed
+
+                lane_args, lanes, _ = lane_arguments([reseed(sim.prep, s) for s in range(2)])
+                loop_args = (*lane_args, lanes)
+            else:
+                loop_args = sim.loop_arguments()
+            flat = flatten(loop_args)
             if flat is None:
                 print("this scenario's components cannot be built ahead of time (not plain arrays and scalars)")
                 return 1
             description = describe(flat[1])
-        name = module_name(description)
+        name = module_name(description, loop)
+        if loop != "run_loop":
+            key = None  # markers name one run's module (what a first run looks for)
         if args.action == "status":
             path = _aot.module_file(where, name) if where else None
             print(f"{name}: {'built, ' + str(path) if path else 'not built'}")
@@ -360,7 +379,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"already built: {built_path}")
             return 0
         t0 = time.perf_counter()
-        path = build(description, where)
+        path = build(description, where, loop)
         print(f"built {path} in {time.perf_counter() - t0:.1f} s")
         if key and where is not None:
             try:
