@@ -25,7 +25,7 @@ Slot functions (all compiled; the arrays are float64 unless noted):
     the same for several runs at once (a Monte Carlo's lanes, rovlab.sim.loop.run_loop_lanes):
     ``plants`` is the runs' plants stacked (:func:`stacked`: each state field with a leading
     lane axis, the constants shared), ``drives`` their drives stacked the same way
-    (rovlab.sim.loop.lane_drive), and ``lanes`` (rovlab.sim.loop.Lanes) holds each lane's
+    (rovlab.sim.loop.stacked_drive), and ``lanes`` (rovlab.sim.loop.Lanes) holds each lane's
     tau_cmd and tau_real (LANES x 4), which lanes are running (``active``) and a scratch array.
     A plant may register a kernel that advances the lanes together (vectorised); without one,
     each running lane is advanced by its ``plant_advance`` (on :func:`lane_of` the stack).
@@ -132,11 +132,12 @@ def _no_actuated(ctrl, t, tau_demanded, tau_achieved):  # pragma: no cover - com
 
 
 def _lane_by_lane(plants, drives, row, lanes):
-    """plant_advance_lanes of a plant without a lanes kernel: each running lane alone
-    (rovlab.sim.loop.lane_by_lane; this is its interpreted entry)."""
-    from rovlab.sim.loop import lane_by_lane
-
-    return lane_by_lane(plants, drives, row, lanes)
+    """plant_advance_lanes of a plant without a lanes kernel: each running lane by its
+    plant_advance."""
+    for lane in range(lanes.active.shape[0]):
+        if lanes.active[lane]:
+            plant_advance(lane_of(plants, lane), lane_of(drives, lane), row, lanes.tau_cmd[lane],
+                          lanes.tau_real[lane])
 
 
 # --------------------------------------------------------------------------------------------
@@ -166,6 +167,13 @@ def state_of(component: Any) -> dict[str, np.ndarray]:
     return {f: np.array(getattr(component, f), copy=True) for f in state_fields(component)}
 
 
+def register_lanes(cls: type, *, stacked: tuple[str, ...]) -> None:
+    """Make :func:`lane_of` work on a NamedTuple that is not a component but has per-run fields
+    in the lanes' loop (rovlab.sim.loop: the drives' draws, the logs): ``stacked`` are the
+    fields that get a leading lane axis."""
+    _register_state(cls, stacked, ())
+
+
 def stacked(components: Any) -> Any:
     """Runs' components of one class stacked for the lanes of a Monte Carlo: the first one's
     constants (the runs must share them) and each state field with a leading lane axis (lane i
@@ -180,8 +188,9 @@ def stacked(components: Any) -> Any:
 
 
 def lane_of(stack: Any, lane: int) -> Any:
-    """Lane ``lane`` of :func:`stacked` components: the component whose state fields are views
-    of that lane (compiled code builds it in registers, without copying)."""
+    """Lane ``lane`` of :func:`stacked` components (or of a :func:`register_lanes` tuple): the
+    component whose state fields are views of that lane (compiled code builds it in registers,
+    without copying)."""
     return stack._replace(**{f: getattr(stack, f)[lane] for f in state_fields(stack)})
 
 
@@ -275,9 +284,7 @@ def _install_overloads() -> None:
     def _ol_plant_advance_lanes(plants, drives, row, lanes):
         fn = _lookup("plant_advance_lanes", plants)
         if fn is _lane_by_lane:
-            from rovlab.sim.loop import lane_by_lane
-
-            return lambda plants, drives, row, lanes: lane_by_lane(plants, drives, row, lanes)
+            return lambda plants, drives, row, lanes: _lanes_alone(plants, drives, row, lanes)
         return lambda plants, drives, row, lanes: fn(plants, drives, row, lanes)
 
 
@@ -322,6 +329,7 @@ def _install_overloads() -> None:
 if not _jit.without_numba():
     _install_overloads()
     _jit.aliases_its_arguments(lane_of)
+    _lanes_alone = _jit.njit(_lane_by_lane)
 
 
 # --------------------------------------------------------------------------------------------

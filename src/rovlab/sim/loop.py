@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rovlab._jit import WITHOUT_NRT, aliases_its_arguments, njit
+from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
     LANE_SCRATCH_ROWS,
@@ -46,6 +46,7 @@ from rovlab.core.components import (
     plant_advance,
     plant_advance_lanes,
     plant_truth,
+    register_lanes,
 )
 from rovlab.estimation.fusion import CH_REASON, CH_STATUS, EVENT_USED, N_REP, REP_EVENT, REP_INNOV, REP_S
 from rovlab.models.sensors import sample_sensors
@@ -262,28 +263,12 @@ def new_lanes(used: int) -> Lanes:
 
 def stacked_drive(drives: list[Drive]) -> Drive:
     """The drives of runs that differ only by their seed, stacked for the lanes: the random draws
-    with a leading lane axis, the schedule (drop-outs, references, disturbances) the first's."""
+    with a leading lane axis, the schedule (drop-outs, references, disturbances) the first's;
+    rovlab.core.components.lane_of gives a lane's Drive back."""
     first = drives[0]
     return first._replace(plant_normals=np.stack([d.plant_normals for d in drives]),
                           bias_normals=np.stack([d.bias_normals for d in drives]),
                           sensor_normals=np.stack([d.sensor_normals for d in drives]))
-
-
-@njit(cache=True, inline="always")
-def lane_drive(drive_stack, drive_lane):
-    """Lane ``drive_lane`` of a :func:`stacked_drive`, as one run's Drive (views)."""
-    return Drive(drive_stack.plant_normals[drive_lane], drive_stack.bias_normals[drive_lane],
-                 drive_stack.sensor_normals[drive_lane], drive_stack.dropout, drive_stack.refs,
-                 drive_stack.heave_force, drive_stack.pset)
-
-
-@njit(cache=True, inline="always")
-def lane_logs(logs_stack, logs_lane):
-    """Lane ``logs_lane`` of stacked logs (:func:`new_stacked_logs`), as one run's logs (views)."""
-    return Logs(logs_stack.truth[logs_lane], logs_stack.y[logs_lane], logs_stack.status[logs_lane],
-                logs_stack.reason[logs_lane], logs_stack.x[logs_lane], logs_stack.P[logs_lane],
-                logs_stack.wrench[logs_lane], logs_stack.pwm[logs_lane], logs_stack.cons[logs_lane],
-                logs_stack.ctrl[logs_lane])
 
 
 def new_stacked_logs(lanes: int, n: int, m: int, n_x: int, n_thrusters: int, n_ctrl_state: int) -> Logs:
@@ -293,17 +278,9 @@ def new_stacked_logs(lanes: int, n: int, m: int, n_x: int, n_thrusters: int, n_c
                 np.empty((lanes, n, n_ctrl_state)))
 
 
-aliases_its_arguments(Drive, Logs, lane_drive, lane_logs)  # views built in compiled code (rovlab._jit)
-
-
-@njit(cache=True)
-def lane_by_lane(plants, drives, row, lanes):
-    """plant_advance_lanes of a plant without a lanes kernel: each running lane by its
-    plant_advance."""
-    for lane in range(lanes.active.shape[0]):
-        if lanes.active[lane]:
-            plant_advance(lane_of(plants, lane), lane_drive(drives, lane), row, lanes.tau_cmd[lane],
-                          lanes.tau_real[lane])
+# the drives' draws and the logs have a leading lane axis in run_loop_lanes (lane_of gives a run's)
+register_lanes(Drive, stacked=("plant_normals", "bias_normals", "sensor_normals"))
+register_lanes(Logs, stacked=Logs._fields)
 
 
 @njit(cache=True, **WITHOUT_NRT)
@@ -332,7 +309,7 @@ def run_loop_lanes(k0, k1, h, plants, sensors, ests, ctrls, act, nav_of, nees_id
         for lane in range(n_lanes):
             if active[lane]:
                 ok = _to_plant(k, row, t, lane_of(plants, lane), sensors, lane_of(ests, lane), lane_of(ctrls, lane),
-                               act, nav_of, nees_idx, lane_drive(drives, lane), lane_logs(log_stack, lane), work)
+                               act, nav_of, nees_idx, lane_of(drives, lane), lane_of(log_stack, lane), work)
                 if ok:
                     for i in range(4):
                         lanes.tau_cmd[lane, i] = work.tau_cmd[i]

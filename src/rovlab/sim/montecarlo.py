@@ -58,18 +58,29 @@ class Campaign:
 
         return _outcome(seed, run_prepared(self.prepared(seed)))
 
-    def run_group(self, seeds: Sequence[int]) -> list[dict[str, Any]]:
+    def run_group(self, seeds: Sequence[int], each: Callable[[dict[str, Any]], None] | None = None
+                  ) -> list[dict[str, Any]]:
         """The runs of up to LANES seeds (:meth:`run` of each, in order): together through the loop
-        over lanes when it is built and the scenario has no distributions, else one by one."""
+        over lanes when it is built, the scenario has no distributions and ROVLAB_LANES is not 0,
+        else one by one. ``each`` is called with every result as soon as it is there."""
         from rovlab.sim.runner import result_of, run_lanes
 
-        if self.template is not None and len(seeds) >= 2:
+        out: list[dict[str, Any]] = []
+        if self.template is not None and len(seeds) >= 2 and lanes_enabled():
             preps = [self.prepared(s) for s in seeds]
             started = time.time()
             logs = run_lanes(preps, request=False)
             if logs is not None:
-                return [_outcome(s, result_of(prep, lg, started), lanes=True) for s, prep, lg in zip(seeds, preps, logs)]
-        return [self.run(s) for s in seeds]
+                for s, prep, lg in zip(seeds, preps, logs):
+                    out.append(_outcome(s, result_of(prep, lg, started), lanes=True))
+                    if each is not None:
+                        each(out[-1])
+                return out
+        for s in seeds:
+            out.append(self.run(s))
+            if each is not None:
+                each(out[-1])
+        return out
 
     def run_all(self, seeds: Sequence[int]) -> list[dict[str, Any]]:
         """:meth:`run_group` over the seeds, LANES at a time."""
@@ -85,9 +96,14 @@ class Campaign:
         if it is built, disabled or the scenario has distributions)."""
         from rovlab.sim.runner import request_lanes, reseed
 
-        if self.template is None:
+        if self.template is None or not lanes_enabled():
             return None
         return request_lanes([reseed(self.template, s) for s in (0, 1)])
+
+
+def lanes_enabled() -> bool:
+    """Whether Monte Carlo runs may go through the loop over lanes (ROVLAB_LANES=0: never)."""
+    return os.environ.get("ROVLAB_LANES", "1").strip() != "0"
 
 
 def _outcome(seed: int, result: Any, *, lanes: bool = False) -> dict[str, Any]:
@@ -146,11 +162,14 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     campaign = Campaign(data, file, seeds[0])  # the design, once; forked workers inherit it
     out: list[dict[str, Any]] = []
     if workers == 1 or n == 1:
+        def keep(result: dict[str, Any]) -> None:
+            out.append(result)
+            if progress:
+                progress(len(out), n)
+
         try:
             for i in range(0, n, LANES):
-                out.extend(campaign.run_group(seeds[i:i + LANES]))
-                if progress:
-                    progress(len(out), n)
+                campaign.run_group(seeds[i:i + LANES], keep)
         except KeyboardInterrupt:  # keep what finished, as the parallel path does
             print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
         campaign.request_lanes()

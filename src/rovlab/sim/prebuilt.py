@@ -21,6 +21,10 @@ From then on :class:`rovlab.sim.runner.Simulation` calls the built module whenev
 arguments are exactly those of its plan (any other array, e.g. a strided view, goes to the JIT
 loop). ``ROVLAB_AOT=0`` turns this off; so does running interpreted (ROVLAB_JIT=interpret).
 ``python -m rovlab.sim.prebuilt build SCENARIO`` builds a scenario's loop in the foreground.
+
+The Monte Carlo's loop over lanes of runs (rovlab.sim.loop.run_loop_lanes, LOOPS) is built the
+same way (``--lanes``; a Monte Carlo requests it when it ends), and only ever run built: a
+Monte Carlo whose lanes loop is not built runs its seeds one by one.
 """
 
 from __future__ import annotations
