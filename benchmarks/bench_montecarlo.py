@@ -114,7 +114,8 @@ def main() -> None:
         peer.write_text(PEER, encoding="utf-8")
         out = str(Path(work) / "out")
         cli = [PY, "-m", "rovlab.interfaces.cli", "simulate", SCENARIO, "--no-figures", "--out", out]
-        _timed(cli + ["--runs", "2"], work)  # warm the numba cache (a no-op when it is)
+        # warm the numba cache (a no-op when it is); one by one, so that it starts no background build
+        _timed(cli + ["--runs", "2"], work, env=ONE_BY_ONE)
         # the loops built ahead of time (one run's and the lanes'), as the first runs and the first
         # Monte Carlo start them in the background (waits for them)
         _timed([PY, "-m", "rovlab.sim.prebuilt", "build", SCENARIO], work)

@@ -17,6 +17,7 @@ dispatcher), so a compiled kernel never calls a plain one.
 
 from __future__ import annotations
 
+import sys
 import types
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -81,6 +82,19 @@ def njit(*args: Any, **options: Any) -> Any:
     return numba.njit(*args, **options)
 
 
+_lanes_unsupported: list[str] = []  # why this numba cannot run the lanes' loop (rovlab.sim.loop.run_loop_lanes)
+
+
+def lanes_supported() -> bool:
+    """Whether the Monte Carlo's loop over lanes can run correctly here: always without numba
+    (it runs built ahead of time, by a numba that could build it), else only if numba's alias
+    analysis could be fixed (:func:`_alias_analysis_to_fixpoint`; its signature is checked)."""
+    if _without_numba or "numba" not in sys.modules:
+        return not _lanes_unsupported
+    _alias_analysis_to_fixpoint()
+    return not _lanes_unsupported
+
+
 def _alias_analysis_to_fixpoint() -> None:
     """Make numba's alias analysis (numba.core.ir_utils.find_potential_aliases, which decides
     what dead-code elimination may remove) independent of the order it visits the blocks in.
@@ -92,11 +106,18 @@ def _alias_analysis_to_fixpoint() -> None:
     controllers' scratch stores in rovlab.sim.loop.run_loop_lanes). Repeating the analysis,
     starting from what the previous pass marked, until nothing is added fixes it; it only ever
     keeps more code alive."""
+    import inspect
+
     from numba.core import ir_utils
 
     if getattr(ir_utils.find_potential_aliases, "_rovlab_fixpoint", False):
         return
     once = ir_utils.find_potential_aliases
+    expected = ["blocks", "args", "typemap", "func_ir", "alias_map", "arg_aliases"]
+    if list(inspect.signature(once).parameters) != expected or not hasattr(ir_utils, "alias_func_extensions"):
+        _lanes_unsupported.append(f"numba {getattr(sys.modules.get('numba'), '__version__', '?')} changed "
+                                  "find_potential_aliases, which rovlab patches for the lanes")
+        return
 
     def to_fixpoint(blocks, args, typemap, func_ir, alias_map=None, arg_aliases=None):
         while True:

@@ -42,6 +42,7 @@ class Campaign:
         from rovlab.sim.scenario import has_distributions
 
         self.data, self.file = data, file
+        self.lanes: bool | None = None  # whether the loop over lanes ran here (None: not tried yet)
         self.book = DesignBook()
         self.template = None if has_distributions(data) else prepare(data, file=file, seed=first_seed, book=self.book)
 
@@ -63,21 +64,23 @@ class Campaign:
         """The runs of up to LANES seeds (:meth:`run` of each, in order): together through the loop
         over lanes when it is built, the scenario has no distributions and ROVLAB_LANES is not 0,
         else one by one. ``each`` is called with every result as soon as it is there."""
-        from rovlab.sim.runner import result_of, run_lanes
+        from rovlab.sim.runner import result_of, run_lanes, run_prepared
 
         out: list[dict[str, Any]] = []
-        if self.template is not None and len(seeds) >= 2 and lanes_enabled():
+        preps = None
+        if self.template is not None and len(seeds) >= 2 and self.lanes is not False and lanes_enabled():
             preps = [self.prepared(s) for s in seeds]
             started = time.time()
             logs = run_lanes(preps, request=False)
+            self.lanes = logs is not None  # not built: not looked for again in this process
             if logs is not None:
                 for s, prep, lg in zip(seeds, preps, logs):
                     out.append(_outcome(s, result_of(prep, lg, started), lanes=True))
                     if each is not None:
                         each(out[-1])
                 return out
-        for s in seeds:
-            out.append(self.run(s))
+        for i, s in enumerate(seeds):
+            out.append(self.run(s) if preps is None else _outcome(s, run_prepared(preps[i])))
             if each is not None:
                 each(out[-1])
         return out
@@ -103,7 +106,9 @@ class Campaign:
 
 def lanes_enabled() -> bool:
     """Whether Monte Carlo runs may go through the loop over lanes (ROVLAB_LANES=0: never)."""
-    return os.environ.get("ROVLAB_LANES", "1").strip() != "0"
+    from rovlab import _jit
+
+    return os.environ.get("ROVLAB_LANES", "1").strip() != "0" and _jit.lanes_supported()
 
 
 def _outcome(seed: int, result: Any, *, lanes: bool = False) -> dict[str, Any]:
@@ -172,6 +177,7 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
                 campaign.run_group(seeds[i:i + LANES], keep)
         except KeyboardInterrupt:  # keep what finished, as the parallel path does
             print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
+            return out
         campaign.request_lanes()
         return out
     # the first run here: it loads the compiled loop before the fork, so no worker pays for it
@@ -266,7 +272,9 @@ def _run_dask(data, file, seeds, scheduler, progress, meanwhile=None):
     out: dict[int, dict[str, Any]] = {}
     try:
         workers = max(1, len(client.scheduler_info().get("workers", {})))
-        size = max(1, min(50, n // (workers * 4) or 1))
+        size = max(1, min(48, n // (workers * 4) or 1))
+        if size > LANES:  # whole groups of lanes (where the lanes loop is built on the worker)
+            size -= size % LANES
         chunks = [seeds[i:i + size] for i in range(0, n, size)]
         futures = [client.submit(_chunk, data, file, c, pure=False) for c in chunks]
         if meanwhile is not None:

@@ -293,6 +293,12 @@ def build(description: list[Any], where: Path | None = None, loop: str = "run_lo
 
     if loop not in LOOPS:
         raise ValueError(f"cannot build {loop!r}: expected one of {', '.join(LOOPS)}")
+    if loop == "run_loop_lanes":
+        from rovlab import _jit
+
+        if not _jit.lanes_supported():
+            raise RuntimeError("this numba's dead-code elimination cannot be fixed for the loop over lanes "
+                               "(rovlab._jit.lanes_supported): Monte Carlo runs one by one")
     where = where or _aot.folder()
     if where is None:
         raise RuntimeError("rovlab's sources cannot be read: no cache folder to build into")
@@ -349,8 +355,13 @@ def main(argv: list[str] | None = None) -> int:
         key = args.key
         loop = "run_loop_lanes" if args.lanes else "run_loop"
         if args.plan:
+            if args.lanes:
+                p.error("--lanes goes with a scenario; a plan names its loop")
             plan = json.loads(Path(args.plan).read_text())
-            loop, description = plan["loop"], plan["arguments"]
+            if isinstance(plan, list):  # a plan written before the lanes: the one-run loop
+                loop, description = "run_loop", plan
+            else:
+                loop, description = plan["loop"], plan["arguments"]
         else:
             sim = simulation(args.scenario, args.config)
             key = sim.prep.loop_key

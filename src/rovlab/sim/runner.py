@@ -551,6 +551,8 @@ def run_lanes(preps: Sequence[Prepared], *, built: bool = True, request: bool = 
     ``built=False``: through numba's JIT (compiled on first use, about as long as the loop).
     ``request=False`` does not start the build.
     Raises PlantDiverged for the first run whose plant diverged."""
+    if built and not prebuilt.enabled():
+        return None  # (before stacking anything: the caller runs them one by one)
     args, lanes, logs = lane_arguments(preps)
     first = preps[0]
     loop_args = (*args, lanes)
@@ -565,6 +567,8 @@ def run_lanes(preps: Sequence[Prepared], *, built: bool = True, request: bool = 
     else:
         if _jit.without_numba():
             raise prebuilt.NotBuilt("the loop over lanes is not built and this process runs without numba")
+        if not _jit.lanes_supported():
+            raise RuntimeError("the loop over lanes cannot run correctly with this numba (rovlab._jit.lanes_supported)")
         with explain_allocation((args[0], args[2], args[3])):
             loop(0, first.n_ctrl, first.h, *loop_args)
     for i, prep in enumerate(preps):
