@@ -147,6 +147,35 @@ def _params(p):
             p[29], p[30], p[31], p[32], p[33], p[34], p[35], p[36], p[37], p[38], p[39], p[40])
 
 
+@njit(cache=True, inline="always")
+def _lane_step(p, w, lane, h, series):
+    """rovlab.models.kinetics.rk4_stages of one lane of the scratch ``w`` (layout above)."""
+    return rk4_stages(p, w[(_X + 8) * LANES + lane], w[(_X + 9) * LANES + lane],
+                      w[_X * LANES + lane], w[(_X + 1) * LANES + lane], w[(_X + 2) * LANES + lane],
+                      w[(_X + 3) * LANES + lane], w[(_X + 4) * LANES + lane], w[(_X + 5) * LANES + lane],
+                      w[(_X + 6) * LANES + lane], w[(_X + 7) * LANES + lane],
+                      w[_F * LANES + lane] + w[_SD * LANES + lane] * w[_NRM * LANES + lane],
+                      w[(_F + 1) * LANES + lane] + w[(_SD + 1) * LANES + lane] * w[(_NRM + 1) * LANES + lane],
+                      w[(_F + 2) * LANES + lane] + w[(_SD + 2) * LANES + lane] * w[(_NRM + 2) * LANES + lane],
+                      w[(_F + 3) * LANES + lane] + w[(_SD + 3) * LANES + lane] * w[(_NRM + 3) * LANES + lane],
+                      h, series)
+
+
+@njit(cache=True, inline="always")
+def _lane_store(w, lane, r):
+    """The new state and heading cosine and sine (r[0:10], a tuple) into the lane's result rows."""
+    w[_OUT * LANES + lane] = r[0]
+    w[(_OUT + 1) * LANES + lane] = r[1]
+    w[(_OUT + 2) * LANES + lane] = r[2]
+    w[(_OUT + 3) * LANES + lane] = r[3]
+    w[(_OUT + 4) * LANES + lane] = r[4]
+    w[(_OUT + 5) * LANES + lane] = r[5]
+    w[(_OUT + 6) * LANES + lane] = r[6]
+    w[(_OUT + 7) * LANES + lane] = r[7]
+    w[(_OUT + 8) * LANES + lane] = r[8]
+    w[(_OUT + 9) * LANES + lane] = r[9]
+
+
 @njit(cache=True, error_model="numpy")  # no Python division check: no early exit, so the lanes vectorise
 def _rk4_lanes(p, w, n_lanes, h):
     """One RK4 step of lanes 0 .. n_lanes-1 of the scratch ``w`` (layout above), every heading
@@ -154,25 +183,8 @@ def _rk4_lanes(p, w, n_lanes, h):
     (their results are then not those of rk4_scalars, and the caller redoes the step)."""
     pt = _params(p)
     for lane in range(n_lanes):
-        r = rk4_stages(pt, w[(_X + 8) * LANES + lane], w[(_X + 9) * LANES + lane],
-                       w[_X * LANES + lane], w[(_X + 1) * LANES + lane], w[(_X + 2) * LANES + lane],
-                       w[(_X + 3) * LANES + lane], w[(_X + 4) * LANES + lane], w[(_X + 5) * LANES + lane],
-                       w[(_X + 6) * LANES + lane], w[(_X + 7) * LANES + lane],
-                       w[_F * LANES + lane] + w[_SD * LANES + lane] * w[_NRM * LANES + lane],
-                       w[(_F + 1) * LANES + lane] + w[(_SD + 1) * LANES + lane] * w[(_NRM + 1) * LANES + lane],
-                       w[(_F + 2) * LANES + lane] + w[(_SD + 2) * LANES + lane] * w[(_NRM + 2) * LANES + lane],
-                       w[(_F + 3) * LANES + lane] + w[(_SD + 3) * LANES + lane] * w[(_NRM + 3) * LANES + lane],
-                       h, True)
-        w[_OUT * LANES + lane] = r[0]
-        w[(_OUT + 1) * LANES + lane] = r[1]
-        w[(_OUT + 2) * LANES + lane] = r[2]
-        w[(_OUT + 3) * LANES + lane] = r[3]
-        w[(_OUT + 4) * LANES + lane] = r[4]
-        w[(_OUT + 5) * LANES + lane] = r[5]
-        w[(_OUT + 6) * LANES + lane] = r[6]
-        w[(_OUT + 7) * LANES + lane] = r[7]
-        w[(_OUT + 8) * LANES + lane] = r[8]
-        w[(_OUT + 9) * LANES + lane] = r[9]
+        r = _lane_step(pt, w, lane, h, True)
+        _lane_store(w, lane, r)
         w[(_OUT + 10) * LANES + lane] = 1.0 if r[10] else 0.0
     outside = 0
     for lane in range(n_lanes):
@@ -182,20 +194,11 @@ def _rk4_lanes(p, w, n_lanes, h):
 
 @njit(cache=True)
 def _rk4_lanes_exact(p, w, n_lanes, h):
-    """The RK4 step of every lane by rk4_scalars (sin and cos where an increment is large): for
-    a step where some lane left the series' range (a very fast turn, or a diverging plant)."""
+    """The RK4 step of every lane as rk4_scalars does it (sin and cos where an increment is
+    large): for a step where some lane left the series' range (a very fast turn, or a diverging
+    plant)."""
     for lane in range(n_lanes):
-        r = rk4_scalars(p, w[(_X + 8) * LANES + lane], w[(_X + 9) * LANES + lane],
-                        w[_X * LANES + lane], w[(_X + 1) * LANES + lane], w[(_X + 2) * LANES + lane],
-                        w[(_X + 3) * LANES + lane], w[(_X + 4) * LANES + lane], w[(_X + 5) * LANES + lane],
-                        w[(_X + 6) * LANES + lane], w[(_X + 7) * LANES + lane],
-                        w[_F * LANES + lane] + w[_SD * LANES + lane] * w[_NRM * LANES + lane],
-                        w[(_F + 1) * LANES + lane] + w[(_SD + 1) * LANES + lane] * w[(_NRM + 1) * LANES + lane],
-                        w[(_F + 2) * LANES + lane] + w[(_SD + 2) * LANES + lane] * w[(_NRM + 2) * LANES + lane],
-                        w[(_F + 3) * LANES + lane] + w[(_SD + 3) * LANES + lane] * w[(_NRM + 3) * LANES + lane],
-                        h)
-        for i in range(10):
-            w[(_OUT + i) * LANES + lane] = r[i]
+        _lane_store(w, lane, _lane_step(p, w, lane, h, False))
 
 
 @njit(cache=True)
