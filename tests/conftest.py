@@ -2,15 +2,9 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
-
-# The filter's ahead-of-time kernels (rovlab._aot) are tested in tests/estimation/test_aot.py,
-# in their own cache folder; elsewhere the JIT kernels run (the same numbers) and no test's
-# `rovlab filter` starts a background build that could outlive the test run.
-os.environ["ROVLAB_AOT"] = "0"
 
 from rovlab.params import load_vehicle
 

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rovlab import _jit
 from rovlab._jit import LazyKernels
 from rovlab.allocation import kernels as _plain
 from rovlab.allocation.geometry import configuration_matrix
@@ -108,15 +107,15 @@ class Allocator:
         self._kernels: tuple | None = None  # (allocate_kernel, bank_pwm), resolved on first use
 
     def __getstate__(self) -> dict:
-        """Pickled without the resolved kernels (numba dispatchers: a design stored on disk must
-        load in a process that runs without numba, rovlab.sim.runner.stored_design)."""
+        """Pickled without the resolved kernels (numba dispatchers are resolved again where the
+        allocator is unpickled: a Monte Carlo worker, a stored design)."""
         state = dict(self.__dict__)
         state["_kernels"] = None
         return state
 
     def _resolve(self) -> tuple:
         if self._kernels is None:
-            if self.compiled and not _jit.without_numba():
+            if self.compiled:
                 self._kernels = (_kernels.compiled()["allocate_kernel"], _thrusters.bank_pwm)
             else:
                 self._kernels = (_plain.allocate_kernel, _plain_thrusters.bank_pwm)

@@ -107,7 +107,7 @@ def _damping(ctrl, i, v):
     return (ctrl.D[i] + ctrl.Dq[i] * abs(v) + ctrl.Dc[i] * v * v) * v
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _dp_step(ctrl, t, nav, ref, tau):
     s = ctrl.state
     psi = nav[3]
@@ -154,7 +154,7 @@ def _dp_step(ctrl, t, nav, ref, tau):
     s[_ETA + 3] = wrap_angle(s[_ETA + 3])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _dp_actuated(ctrl, t, tau_demanded, tau_achieved):
     s = ctrl.state
     # the shortfall of the allocation (body) in NED, for the back-calculation

@@ -82,7 +82,7 @@ class LQG(NamedTuple):
 _FROM_NAV = (2, 3, 6, 7, 10, 11)  # z, psi, w, r, b_Z, b_N in rovlab.core.components.TRUTH
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _lqg_step(ctrl, t, nav, ref, tau):
     for i in range(6):
         ctrl.x6[i] = nav[_FROM_NAV[i]]

@@ -146,7 +146,7 @@ class MRAC(NamedTuple):
 _FROM_NAV = (2, 3, 6, 7, 10, 11)  # z, psi, w, r, b_Z, b_N in rovlab.core.components.TRUTH
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _mrac_step(ctrl, t, nav, ref, tau):
     st = ctrl.state
     z = nav[2]
@@ -172,7 +172,7 @@ def _mrac_step(ctrl, t, nav, ref, tau):
     tau[3] = ctrl.u2[1]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _mrac_actuated(ctrl, t, tau_demanded, tau_achieved):
     st = ctrl.state
     adapt(st, ctrl.Y, ctrl.mem[1], ctrl.gamma, ctrl.sigma, ctrl.theta0, ctrl.lo, ctrl.hi, ctrl.h)

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from rovlab._jit import njit  # numba's, or plain in `rovlab filter` with built kernels
+from rovlab._jit import njit
 
 TWO_PI = 2.0 * math.pi
 
@@ -35,8 +35,7 @@ SMALL_ANGLE = 0.1  # |d| up to which cos_sin_small uses its series: the first om
 @njit(cache=True, inline="always")
 def cos_sin_series(d: float) -> tuple[float, float]:
     """(cos d, sin d) by their Taylor series to d^8 and d^9, whatever d: exact to rounding for
-    |d| <= 0.1 only. Without a branch, so a loop over many angles is vectorised (the lanes of
-    rovlab.sim.plant, which check |d| <= 0.1 themselves and redo any step where it fails)."""
+    |d| <= 0.1 only (:func:`cos_sin_small` checks the range)."""
     d2 = d * d
     c = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 * (1.0 / 720.0 - d2 * (1.0 / 40320.0))))
     s = d * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 * (1.0 / 5040.0 - d2 * (1.0 / 362880.0)))))

@@ -21,15 +21,6 @@ Slot functions (all compiled; the arrays are float64 unless noted):
     integrate from t_k to t_k + h with the wrench held: ``tau_cmd`` (4: X, Y, Z, N) is what the
     allocation asked of the thrusters, ``tau_real`` (4) what their PWM commands really give;
     ``drive`` holds the run's noise draws (row = this chunk's step index).
-``plant_advance_lanes(plants, drives, row, lanes)``
-    the same for several runs at once (a Monte Carlo's lanes, rovlab.sim.loop.run_loop_lanes):
-    ``plants`` is the runs' plants stacked (:func:`stacked`: each state field with a leading
-    lane axis, the constants shared), ``drives`` their drives stacked the same way
-    (rovlab.sim.loop.stacked_drive), and ``lanes`` (rovlab.sim.loop.Lanes) holds each lane's
-    tau_cmd and tau_real (LANES x 4), which lanes are running (``active``) and a scratch array.
-    A plant may register a kernel that advances the lanes together (vectorised); without one,
-    each running lane is advanced by its ``plant_advance`` (on :func:`lane_of` the stack).
-    Either way every lane gets exactly the numbers of its run alone.
 ``estimator_correct(est, t, y, present, rep)``
     correct with the samples y (m) that arrived (present, bool); fill ``rep`` (m x N_REP of
     rovlab.estimation.fusion). Every estimator has the fields ``x`` (n), ``P`` (n x n) and
@@ -57,8 +48,6 @@ from typing import Any
 
 import numpy as np
 
-from rovlab import _jit
-
 # Layout of the truth vector and of the estimate handed to controllers (world position and
 # heading, body velocities, and the force/moment biases per DOF).
 TRUTH = ("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N")
@@ -69,15 +58,10 @@ ANGLES = frozenset({"psi"})
 REFERENCE = ("x", "y", "z", "psi")
 WRENCH = ("X", "Y", "Z", "N")
 
-# Runs a Monte Carlo advances together (rovlab.sim.loop.run_loop_lanes): sixteen float64 fill
-# two AVX-512 vectors (four AVX2 ones), and the lanes loop is compiled for this one count.
-LANES = 16
-LANE_SCRATCH_ROWS = 64  # rows of LANES float64 of scratch a plant's lanes kernel may use (rovlab.sim.loop.Lanes)
-
 _STATE: dict[type, tuple[str, ...]] = {}  # component class -> its state fields
 _DRAWS: dict[type, int] = {}  # plant class -> standard normal draws per integration step
 _REGISTRY: dict[str, dict[type, Callable[..., Any]]] = {
-    "plant_truth": {}, "plant_advance": {}, "plant_advance_lanes": {},
+    "plant_truth": {}, "plant_advance": {},
     "estimator_correct": {}, "estimator_predict": {},
     "controller_step": {}, "controller_actuated": {},
 }
@@ -96,20 +80,15 @@ def _register_state(cls: type, state: tuple[str, ...], required: tuple[str, ...]
         if f not in fields:
             raise TypeError(f"{cls.__name__} has no field {f!r} (its fields: {', '.join(fields)})")
     _STATE[cls] = tuple(state)
-    _jit.aliases_its_arguments(cls)  # lane_of builds the class in compiled code (a lane's views)
 
 
-def register_plant(cls: type, *, state: tuple[str, ...], draws: int, truth: Callable, advance: Callable,
-                   advance_lanes: Callable | None = None) -> None:
+def register_plant(cls: type, *, state: tuple[str, ...], draws: int, truth: Callable, advance: Callable) -> None:
     """Bind a plant class: truth(plant, truth), advance(plant, drive, row, tau_cmd, tau_real);
-    ``draws`` standard normal numbers per integration step come in drive.plant_normals;
-    ``advance_lanes(plants, drives, row, lanes)`` optionally advances a Monte Carlo's lanes
-    together (by default each lane is advanced alone)."""
+    ``draws`` standard normal numbers per integration step come in drive.plant_normals."""
     _register_state(cls, state, ())
     _DRAWS[cls] = int(draws)
     _REGISTRY["plant_truth"][cls] = truth
     _REGISTRY["plant_advance"][cls] = advance
-    _REGISTRY["plant_advance_lanes"][cls] = advance_lanes if advance_lanes is not None else _lane_by_lane
 
 
 def register_estimator(cls: type, *, state: tuple[str, ...], correct: Callable, predict: Callable) -> None:
@@ -129,15 +108,6 @@ def register_controller(cls: type, *, state: tuple[str, ...], step: Callable,
 
 def _no_actuated(ctrl, t, tau_demanded, tau_achieved):  # pragma: no cover - compiled
     return None
-
-
-def _lane_by_lane(plants, drives, row, lanes):
-    """plant_advance_lanes of a plant without a lanes kernel: each running lane by its
-    plant_advance."""
-    for lane in range(lanes.active.shape[0]):
-        if lanes.active[lane]:
-            plant_advance(lane_of(plants, lane), lane_of(drives, lane), row, lanes.tau_cmd[lane],
-                          lanes.tau_real[lane])
 
 
 # --------------------------------------------------------------------------------------------
@@ -167,33 +137,6 @@ def state_of(component: Any) -> dict[str, np.ndarray]:
     return {f: np.array(getattr(component, f), copy=True) for f in state_fields(component)}
 
 
-def register_lanes(cls: type, *, stacked: tuple[str, ...]) -> None:
-    """Make :func:`lane_of` work on a NamedTuple that is not a component but has per-run fields
-    in the lanes' loop (rovlab.sim.loop: the drives' draws, the logs): ``stacked`` are the
-    fields that get a leading lane axis."""
-    _register_state(cls, stacked, ())
-
-
-def stacked(components: Any) -> Any:
-    """Runs' components of one class stacked for the lanes of a Monte Carlo: the first one's
-    constants (the runs must share them) and each state field with a leading lane axis (lane i
-    is a copy of components[i]'s state). :func:`lane_of` gives a lane back as a component."""
-    first = components[0]
-    fields = state_fields(first)
-    for c in components[1:]:
-        if type(c) is not type(first):
-            raise TypeError(f"stacked: {type(c).__name__} among {type(first).__name__}")
-    return first._replace(**{f: np.ascontiguousarray(np.stack([np.asarray(getattr(c, f)) for c in components]))
-                             for f in fields})
-
-
-def lane_of(stack: Any, lane: int) -> Any:
-    """Lane ``lane`` of :func:`stacked` components (or of a :func:`register_lanes` tuple): the
-    component whose state fields are views of that lane (compiled code builds it in registers,
-    without copying)."""
-    return stack._replace(**{f: getattr(stack, f)[lane] for f in state_fields(stack)})
-
-
 def restore(component: Any, state: dict[str, np.ndarray]) -> list[str]:
     """Copy saved state into the component where the field exists and the shape matches;
     returns the fields that were restored."""
@@ -213,7 +156,7 @@ def restore(component: Any, state: dict[str, np.ndarray]) -> list[str]:
 # --------------------------------------------------------------------------------------------
 
 # Called from compiled code, a slot is replaced by the registered kernel at compile time (the
-# overloads below). Called from Python (an interpreted run: NUMBA_DISABLE_JIT, see rovlab._jit)
+# overloads below). Called from Python (NUMBA_DISABLE_JIT set by the user: every kernel plain)
 # it looks the kernel up by the component's class.
 
 def _bound(slot: str, component: Any) -> Callable[..., Any]:
@@ -230,10 +173,6 @@ def plant_truth(plant, truth):
 
 def plant_advance(plant, drive, row, tau_cmd, tau_real):
     return _bound("plant_advance", plant)(plant, drive, row, tau_cmd, tau_real)
-
-
-def plant_advance_lanes(plants, drives, row, lanes):
-    return _bound("plant_advance_lanes", plants)(plants, drives, row, lanes)
 
 
 def estimator_correct(est, t, y, present, rep):
@@ -253,9 +192,8 @@ def controller_actuated(ctrl, t, tau_demanded, tau_achieved):
 
 
 def _install_overloads() -> None:
-    """Make the slot functions compile to the registered kernels (numba ``overload``). Not done
-    in a process that runs without numba (rovlab._jit.run_without_numba: the loop built ahead of
-    time), where the slots are only ever called from Python."""
+    """Make the slot functions compile to the registered kernels (numba ``overload``, numba's
+    public extension API)."""
     from numba.core import types
     from numba.core.errors import TypingError
     from numba.extending import overload
@@ -278,26 +216,6 @@ def _install_overloads() -> None:
     def _ol_plant_advance(plant, drive, row, tau_cmd, tau_real):
         fn = _lookup("plant_advance", plant)
         return lambda plant, drive, row, tau_cmd, tau_real: fn(plant, drive, row, tau_cmd, tau_real)
-
-
-    @overload(plant_advance_lanes)  # no cache: a non-rovlab component must not enter a shared cache index
-    def _ol_plant_advance_lanes(plants, drives, row, lanes):
-        fn = _lookup("plant_advance_lanes", plants)
-        if fn is _lane_by_lane:
-            return lambda plants, drives, row, lanes: _lanes_alone(plants, drives, row, lanes)
-        return lambda plants, drives, row, lanes: fn(plants, drives, row, lanes)
-
-
-    @overload(lane_of, inline="always")
-    def _ol_lane_of(stack, index):
-        cls = getattr(stack, "instance_class", None)
-        if cls not in _STATE:
-            raise TypingError(f"lane_of: {stack} is not a registered component")
-        state = _STATE[cls]
-        parts = ", ".join(f"stack.{f}[index]" if f in state else f"stack.{f}" for f in cls._fields)
-        namespace: dict[str, Any] = {"cls": cls}
-        exec(f"def lane_of_impl(stack, index):\n    return cls({parts})\n", namespace)
-        return namespace["lane_of_impl"]
 
 
     @overload(estimator_correct, inline="always")  # no cache: a non-rovlab component must not enter a shared cache index
@@ -326,10 +244,7 @@ def _install_overloads() -> None:
         return lambda ctrl, t, tau_demanded, tau_achieved: fn(ctrl, t, tau_demanded, tau_achieved)
 
 
-if not _jit.without_numba():
-    _install_overloads()
-    _jit.aliases_its_arguments(lane_of)
-    _lanes_alone = _jit.njit(_lane_by_lane)
+_install_overloads()
 
 
 # --------------------------------------------------------------------------------------------

@@ -64,12 +64,8 @@ def chi2_interval(dof: int, runs: int = 1, probability: float = 0.95) -> tuple[f
 def chi2_ppf(q: float, dof: Any) -> Any:
     """scipy.stats.chi2.ppf(q, dof) for 0 < q < 1 and dof >= 1 (an int or an int array), by the
     special function scipy.stats computes it with (2 gammaincinv(dof/2, q), the inverse of the
-    regularised lower incomplete gamma function), without importing scipy.stats (~0.5 s).
-
-    The values are kept (in this process, and on disk in ``<cache>/chi2-quantiles.json``), so a
-    process that needs only quantiles computed before does not import scipy.special either
-    (~0.08 s of every Monte Carlo and simulation process); the stored numbers are scipy's, to the
-    last bit."""
+    regularised lower incomplete gamma function), without importing scipy.stats (~0.5 s); each
+    value is computed once per process."""
     d = np.asarray(dof)
     if d.ndim == 0:
         out: Any = _quantiles(float(q), [d.item()])[0]
@@ -78,24 +74,11 @@ def chi2_ppf(q: float, dof: Any) -> Any:
     return np.asarray(_quantiles(float(q), uniq.tolist()), dtype=float)[inverse].reshape(d.shape)
 
 
-_QUANTILES: dict[str, float] = {}  # "q dof" -> chi2.ppf(q, dof), as stored (rovlab.cache_home)
-_LOADED: list[bool] = []
+_QUANTILES: dict[str, float] = {}  # "q dof" -> chi2.ppf(q, dof), computed once per process
 
 
 def _quantiles(q: float, dofs: list[Any]) -> list[float]:
-    import json
-
-    from rovlab import cache_home
-
-    path = cache_home() / "chi2-quantiles.json"
-    if not _LOADED:
-        _LOADED.append(True)
-        try:
-            stored = json.loads(path.read_text(encoding="utf-8"))
-            _QUANTILES.update({k: float(v) for k, v in stored.items() if isinstance(v, float)})
-        except (OSError, ValueError, AttributeError):
-            pass  # none yet, or damaged: computed again
-    out, missing = [], False
+    out = []
     for dof in dofs:
         key = f"{q!r} {dof!r}"
         value = _QUANTILES.get(key)
@@ -103,16 +86,7 @@ def _quantiles(q: float, dofs: list[Any]) -> list[float]:
             from scipy.special import gammaincinv
 
             value = _QUANTILES[key] = float(2.0 * gammaincinv(float(dof) / 2.0, q))
-            missing = True
         out.append(value)
-    if missing:
-        from rovlab.core.files import atomic_write_text
-
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(path, json.dumps(_QUANTILES))
-        except OSError:
-            pass  # a cache that cannot be written costs only the time
     return out
 
 

@@ -221,12 +221,12 @@ def ekf_predict(p, inv_T, W, h, n_sub, x, P, tau, A, A8, F, k, xs, f):
             P[i, j] = 0.5 * (PP[i, j] + PP[j, i])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _correct(est, t, y, present, rep):
     correct_arrays(est.x, est.P, est.ch, est.H, est.cfg, est.wrap, t, y, present, rep, est.work)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _predict(est, t, tau):
     ekf_predict(est.p, est.inv_T, est.W, est.h, est.n_sub, est.x, est.P, tau, est.A, est.A8, est.F, est.k,
                 est.xs, est.f)

@@ -140,7 +140,7 @@ import math
 
 import numpy as np
 
-from rovlab._jit import njit  # numba's, or plain in `rovlab filter` with built kernels
+from rovlab._jit import njit
 from rovlab.core.angles import wrap_angle  # noqa: F401  (re-exported for the filter kernels)
 from rovlab.estimation.layout import (  # noqa: F401  (re-exported: the layout and codes live there)
     CFG_ANGLE,
@@ -371,7 +371,7 @@ def _weight(ch, cfg, j, status, t):
     return 1.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
     """Decide which samples of this step are used; update ``ch`` and ``rep`` in place.
 

@@ -70,7 +70,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib.stride_tricks import as_strided
 
-from rovlab._jit import njit  # numba's, or plain in `rovlab filter` with built kernels
+from rovlab._jit import njit
 from rovlab.estimation.fusion import (
     CFG_ANGLE,
     CFG_R,
@@ -183,7 +183,7 @@ def kf_workspace(n: int, m: int) -> np.ndarray:
     return np.empty(work_size(n, m))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def predict_arrays(x, P, Delta, Q, wrap, sp, u, work):
     """kf_predict on unpacked model arrays (for loops that unpack once)."""
     n = x.shape[0]
@@ -308,7 +308,7 @@ def kf_update_scalar(x, P, h, value, r, angle, wrap, work):
     _update_row(x, P, H, 0, idx, value, r, r, angle, wrap, work)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def correct_arrays(x, P, ch, H, cfg, wrap, t, y, present, rep, work):
     """kf_correct on unpacked model arrays (for loops that unpack once)."""
     m = H.shape[0]
@@ -325,7 +325,7 @@ def correct_arrays(x, P, ch, H, cfg, wrap, t, y, present, rep, work):
     return used
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def step_arrays(Delta, Q, H, cfg, wrap, sp, x, P, ch, t, u, y, present, xc, Pc, rep, work):
     """kf_step on unpacked model arrays (for loops that unpack once)."""
     correct_arrays(x, P, ch, H, cfg, wrap, t, y, present, rep, work)
@@ -392,7 +392,7 @@ def _out_size(n: int, m: int) -> int:
     return 3 + n + n * n + m * N_CH + n + n * n + m * N_REP + 1 + m + n * n + 6 * n + m
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _online_into(model, state, t, u, y, present, use_present, out):
     Phi, Delta, Q, H, cfg, wrap, sp = unpack_model(model)
     n = int(model[0])
@@ -757,10 +757,7 @@ class DepthHeadingFilter:
         innov = np.empty((N, self.m))
         S = np.empty((N, self.m))
         flags = np.empty(N, dtype=np.int8)
-        from rovlab import _aot  # built ahead of time when it is (no JIT start-up); else numba's
-
-        _aot.call("kf_run", kf_run, self.packed, x, P, ch, t, u, y, pres, npred, X, V, status, reason, event, innov,
-                  S, flags)
+        kf_run(self.packed, x, P, ch, t, u, y, pres, npred, X, V, status, reason, event, innov, S, flags)
         final = Belief.make(x, P, ch, float(t[-1]) if N else b.t)
         return FilterRun(t=t, x=X, variance=V, status=status, reason=reason, event=event, innovation=innov,
                          innovation_variance=S, flags=flags, belief=final, states=self.model.states,

@@ -43,12 +43,12 @@ class KalmanFilter(NamedTuple):
     work: np.ndarray  # kernel scratch
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _correct(est, t, y, present, rep):
     correct_arrays(est.x, est.P, est.ch, est.H, est.cfg, est.wrap, t, y, present, rep, est.work)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _predict(est, t, tau):
     for i in range(est.inputs.shape[0]):
         est.u[i] = tau[est.inputs[i]]
@@ -61,8 +61,7 @@ register_estimator(KalmanFilter, state=("x", "P", "ch"), correct=_correct, predi
 def from_model(fm: FilterModel) -> KalmanFilter:
     """The component of a designed filter model, at its initial belief."""
     packed = pack_model(fm.Phi, fm.Delta, fm.Q, fm.H, fm.channel_config(), fm.wrap_states())
-    # plain functions: a compiled call here would start numba's JIT in a process that runs the
-    # loop built ahead of time (rovlab.sim.prebuilt)
+    # plain functions: set-up code run once, which need not compile anything
     Phi, Delta, Q, H, cfg, wrap, sp = (np.array(a, dtype=float, order="C") for a in plain(unpack_model)(packed))
     n, m = fm.Phi.shape[0], len(fm.channels)
     return KalmanFilter(Phi, Delta, Q, H, cfg, wrap, sp, np.array(_INPUTS, dtype=np.int64),

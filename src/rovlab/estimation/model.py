@@ -316,22 +316,6 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
 
 
 
-def cached_filter_model(vehicle: Vehicle, config: DesignConfig) -> FilterModel:
-    """:func:`build_filter_model` (observable designs only), kept on disk after the first time.
-
-    For commands that run a designed filter and nothing else (``rovlab filter``): designing
-    (scipy.special's import, the discretisation, the observability and start-up analyses) costs
-    ~4 MiB of peak memory and a few tens of milliseconds of a run that is otherwise about a
-    second (numba imports scipy.linalg itself). Kept by rovlab.core.store (keyed on the vehicle,
-    the configuration, rovlab's sources); a refused design is never stored (it raises every
-    time).
-    """
-    from rovlab.core.store import stored
-
-    model: FilterModel = stored("", (vehicle, config), lambda: build_filter_model(vehicle, config), FilterModel)
-    return model
-
-
 def make_channels(vehicle: Vehicle, config: DesignConfig, state_of: dict[str, int], *, estimator: str
                   ) -> tuple[list[Channel], list[Problem]]:
     """The configuration's measurements as channels of a filter whose state index of each

@@ -33,6 +33,7 @@ _COMMAND_MODULE = {
     "lab": "rovlab.interfaces.cli_ident",
     "simulate": "rovlab.interfaces.cli_sim",
     "scenarios": "rovlab.interfaces.cli_sim",
+    "compile": "rovlab.interfaces.cli_sim",
     "demo": "rovlab.interfaces.cli_sim",
     "design": "rovlab.interfaces.cli_design",
     "filter": "rovlab.interfaces.cli_design",
@@ -72,11 +73,9 @@ def _parser_for(argv: Sequence[str]) -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     from rovlab.params.validate import ConfigError
 
-    whole_process = argv is None  # the command line of this process (may restart it: cli_sim)
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = _parser_for(argv)
     args = parser.parse_args(argv)
-    args.whole_process = whole_process
     try:
         return int(args.func(args) or 0)
     except (ConfigError, UserError) as exc:

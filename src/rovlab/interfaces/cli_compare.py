@@ -47,9 +47,8 @@ def run_comparison(scenario: str, controllers: list[str], runs: int, seed: int |
     data, file = load_scenario_data(scenario)
     name = str(data.get("name") or Path(file).stem)
     if not quiet:
-        from rovlab.interfaces.cli_sim import announce_compile, checked_jit_mode, loop_of
+        from rovlab.interfaces.cli_sim import announce_compile, loop_of
 
-        checked_jit_mode()
         announce_compile([loop_of(data, file, controller=c) for c in controllers])
     out = Path(out) if out is not None else Path("out") / f"compare-{name}"
     first = seed if seed is not None else int(data.get("seed", 0)) if isinstance(data.get("seed", 0), int) else 0

@@ -50,15 +50,13 @@ def _common(p: argparse.ArgumentParser) -> None:
                         "(default: default)")
 
 
-def _load(args: argparse.Namespace, *, require_observable: bool = True, cached: bool = False):
-    from rovlab.estimation.model import build_filter_model, cached_filter_model
+def _load(args: argparse.Namespace, *, require_observable: bool = True):
+    from rovlab.estimation.model import build_filter_model
     from rovlab.params.design import load_design_config
     from rovlab.params.vehicle import load_vehicle
 
     vehicle = load_vehicle(args.vehicle)
     config = load_design_config(args.config)
-    if cached:  # the design on disk from an earlier run (see cached_filter_model)
-        return vehicle, config, cached_filter_model(vehicle, config)
     return vehicle, config, build_filter_model(vehicle, config, require_observable=require_observable)
 
 
@@ -164,28 +162,10 @@ def _cmd_filter(args: argparse.Namespace) -> int:
 
     if args.max_gap_steps < 1:
         raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
-    from rovlab import _aot, _jit
-
-    if Path(args.log).suffix.lower() not in (".tlog", ".mcap") and _aot.enabled() and _aot.built():
-        _jit.run_without_numba()  # a CSV log and the kernels built ahead of time: numba is not needed
-    vehicle, config, model = _load(args, cached=True)
+    vehicle, config, model = _load(args)
     _check_initial(config, model)
-    _build_kernels_ahead()
     with tempfile.TemporaryDirectory(prefix="rovlab-filter-") as tmp:
         return _filter(args, vehicle, config, model, _as_csv(args.log, vehicle, model, Path(tmp)))
-
-
-def _build_kernels_ahead() -> None:
-    """The first run of this version: start building the filter's kernels ahead of time in the
-    background (rovlab._aot), so that later runs skip numba's compiler set-up (~0.5 s)."""
-    from rovlab import _aot
-
-    if not _aot.enabled() or _aot.built() or _aot.failed():
-        return  # built, off, or its build failed here (its log says why; the JIT kernels run)
-    log = _aot.build_in_background()
-    if log:
-        print(f"rovlab filter: building its kernels ahead of time in the background, once per version "
-              f"(~20-60 s; log: {log}); until then they run through numba's JIT", file=sys.stderr)
 
 
 def _as_csv(log: str, vehicle, model, folder: Path) -> str:

@@ -42,7 +42,7 @@ def _cmd_hmi(args: argparse.Namespace) -> int:
     except ImportError:
         raise UserError("the HMI needs aiohttp: pip install 'rovlab[hmi]'") from None
     if args.source == "simulation":
-        from rovlab.interfaces.cli_sim import first_run
+        from rovlab.interfaces.cli_sim import announce_compile, loop_of
         from rovlab.params.validate import ConfigError
         from rovlab.sim.scenario import load_scenario_data
 
@@ -50,8 +50,8 @@ def _cmd_hmi(args: argparse.Namespace) -> int:
             data, file = load_scenario_data(args.scenario)
         except (ConfigError, OSError):
             pass  # the session reports a bad scenario, with file and key
-        else:  # a live simulation runs at most 50x real time: interpreted is fast enough to start at once
-            first_run(data, file, args.scenario, 1, 1, design=args.config, live=True)
+        else:
+            announce_compile([loop_of(data, file, design=args.config)])
     from rovlab.interfaces.hmi.session import SPEED_RANGE, Session
 
     if not 0 <= args.port <= 65535:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -25,6 +24,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     sim.add_argument("--no-figures", action="store_true", help="skip PNGs and report.html (faster)")
     sim.set_defaults(func=_cmd_simulate)
 
+    comp = sub.add_parser("compile", help="compile the loops of scenarios into numba's cache ahead of their runs",
+                          description="Compile the closed loop of each scenario's combination of components "
+                                      "(plant, estimator, controller) into numba's disk cache, so that later runs "
+                                      "load it instead of compiling it (e.g. in a Dockerfile). Nothing else ever "
+                                      "compiles ahead or in the background.")
+    comp.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="packaged scenario names or TOML paths")
+    comp.add_argument("--all", action="store_true",
+                      help="every combination the packaged scenarios run (and rovlab compare's MRAC and LQG)")
+    comp.set_defaults(func=_cmd_compile)
+
     lst = sub.add_parser("scenarios", help="list the packaged scenarios")
     lst.set_defaults(func=_cmd_list)
 
@@ -43,6 +52,36 @@ def _cmd_list(args: argparse.Namespace) -> int:
     for name in packaged_scenario_names():
         sc = load_scenario(name)
         print(f"{name:22s} {sc.description}")
+    return 0
+
+
+def _cmd_compile(args: argparse.Namespace) -> int:
+    from rovlab.interfaces.cli import UserError
+    from rovlab.sim.compile import compile_loop, needs_compiling
+    from rovlab.sim.runner import prepare
+    from rovlab.sim.scenario import load_scenario_data, packaged_scenario_names
+
+    if bool(args.scenarios) == bool(args.all):
+        raise UserError("name the scenarios to compile, or --all (not both)")
+    jobs: list[tuple[str, str | None]] = [(name, None) for name in args.scenarios]
+    if args.all:
+        jobs = [(name, None) for name in packaged_scenario_names()]
+        jobs += [(name, c) for name in _COMPARISONS for c in ("lqg", "mrac")]
+    loaded = [(ref, controller, *load_scenario_data(ref)) for ref, controller in jobs]  # every file checked first
+    seen: set[str] = set()
+    total = time.perf_counter()
+    for ref, controller, data, file in loaded:
+        prep = prepare({**data, "controller": controller} if controller else data, file=file)
+        key = prep.loop_key
+        if key in seen:
+            continue
+        seen.add(key)
+        if not needs_compiling(key):
+            print(f"{key:24s} cached ({ref})")
+            continue
+        print(f"{key:24s} compiling ({ref}) ...", end="", flush=True)
+        print(f" {compile_loop(prep):.1f} s")
+    print(f"{len(seen)} loop{'s' if len(seen) != 1 else ''} ready in {time.perf_counter() - total:.1f} s")
     return 0
 
 
@@ -70,17 +109,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     data, file = load_scenario_data(args.scenario)
     name = str(data.get("name") or Path(file).stem)
     out = Path(args.out or Path("out") / name)
-    # numba-free only when this process is the command (a script or notebook calling main([...])
-    # keeps its numba, and is never restarted)
-    first_run(data, file, args.scenario, args.runs, args.workers, numba_free=getattr(args, "whole_process", False))
-    from rovlab.sim.prebuilt import NotBuilt
-
-    try:
-        return _simulate(args, data, file, out)
-    except NotBuilt as exc:  # numba-free, and the loop built ahead of time does not fit: start again with the JIT
-        print(f"note: {exc}; starting again with the JIT loop (ROVLAB_AOT=0)", file=sys.stderr, flush=True)
-        sys.stdout.flush()
-        os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], {**os.environ, "ROVLAB_AOT": "0"})
+    return _simulate(args, data, file, out)
 
 
 def _simulate(args: argparse.Namespace, data, file, out: Path) -> int:
@@ -106,24 +135,6 @@ def _simulate(args: argparse.Namespace, data, file, out: Path) -> int:
     return 130 if interrupted else 0  # Ctrl-C: the finished runs are written, the status says it stopped
 
 
-# Interpreted, a control step of the loop costs ~0.6 ms (KF + LQG) to ~2 ms (EKF + DP) on a 2-core
-# machine; compiling a loop costs one to three minutes there (rovlab._jit).
-_INTERPRETED_STEP_S = 2.5e-3
-_INTERPRET_BUDGET_S = 20.0
-
-
-def first_run_tier(mode: str, compiled: bool, rows: int, parallel: int) -> str:
-    """How to run ``rows`` control steps (over ``parallel`` processes): "cached" (the compiled
-    loop is in the cache), "interpret" or "compile" (and wait for it)."""
-    if mode == "interpret":
-        return "interpret"
-    if compiled:
-        return "cached"
-    if mode == "auto" and rows * _INTERPRETED_STEP_S / max(1, parallel) <= _INTERPRET_BUDGET_S:
-        return "interpret"
-    return "compile"
-
-
 def loop_of(data, file, controller: str | None = None, design: str | None = None) -> tuple[str, str, float] | None:
     """(marker key, description, duration in control steps) of the loop a scenario runs, read
     without importing the simulator (so without compiling anything); None if the scenario or its
@@ -144,65 +155,29 @@ def loop_of(data, file, controller: str | None = None, design: str | None = None
             rows)
 
 
-def checked_jit_mode() -> str:
-    from rovlab import _jit
-    from rovlab.interfaces.cli import UserError
-
-    try:
-        return _jit.jit_mode()
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
-
-
 def announce_compile(loops: list[tuple[str, str, float] | None]) -> None:
-    """Say which loops compile now (those not in the cache), and about how long it takes."""
-    from rovlab import _jit
+    """Say which loops compile now (those numba has not cached yet), before they do."""
+    from rovlab.sim.compile import needs_compiling
 
-    if _jit.interpreting():
-        return
-    todo = {key: what for key, what, _ in filter(None, loops) if not _jit.is_compiled(key)}
-    if not todo:
-        return
-    known = [_jit.compile_estimate(k) for k in todo]
-    if all(t is not None for t in known):
-        about = f"about {sum(t for t in known if t is not None):.0f} s, as last time"
-    else:
-        about = f"{'a minute or more' if len(todo) == 1 else 'a few minutes'} on a 2-core machine"
-    print(f"compiling {' and '.join(todo.values())} once ({about}); later runs load "
-          f"{'it' if len(todo) == 1 else 'them'} from the cache", file=sys.stderr, flush=True)
+    todo = list(dict.fromkeys(what for key, what, _ in filter(None, loops) if needs_compiling(key)))
+    if todo:
+        print(f"compiling {' and '.join(todo)} (once per machine: numba caches "
+              f"{'it' if len(todo) == 1 else 'them'}; about 30 s each on 2 cores) ...", file=sys.stderr, flush=True)
 
 
-def first_run(data, file, ref: str, runs: int, workers: int | None, design: str | None = None,
-              live: bool = False, numba_free: bool = False) -> None:
-    """Before anything is compiled: if the loop for this scenario's components is not in the cache
-    yet, either run it interpreted (short work, or ``live``: paced at most 50x real time, which the
-    interpreter keeps up with; the loop compiles in the background for the next runs) or say that
-    it compiles now and for how long (rovlab._jit; ROVLAB_JIT overrides)."""
-    from rovlab import _jit
-    from rovlab.sim import prebuilt
+def ensure_compiled(prep: Any) -> float | None:
+    """Compile the loop a prepared run needs if numba has not cached it yet, saying so and how
+    long it took; the seconds, or None if it was cached."""
+    from rovlab.sim.compile import compile_loop, needs_compiling
 
-    mode = checked_jit_mode()
-    loop = loop_of(data, file, design=design)
-    if loop is None or _jit.interpreting():
-        return  # a bad scenario (reported by the run) or NUMBA_DISABLE_JIT set by the user
-    key, what, rows = loop
-    if numba_free and mode != "interpret" and not live and prebuilt.loads_for(key) and _jit.run_without_numba():
-        return  # the loop built ahead of time runs, and numba is not even imported (rovlab.sim.prebuilt)
-    work = 0 if live else int(runs * rows)
-    tier = first_run_tier(mode, _jit.is_compiled(key) or prebuilt.built_for(key), work,
-                          min(runs, workers or os.cpu_count() or 1))
-    if tier == "cached":
-        return
-    if tier == "interpret" and _jit.interpret_this_process():
-        if mode == "interpret":
-            return
-        log = _jit.compile_in_background(key, ref, design)
-        msg = f"first run of {what} here: it runs interpreted this time (same results, no compile wait)"
-        if log:
-            msg += f"; it compiles in the background for the next runs (low priority; log {log})"
-        print(msg, file=sys.stderr, flush=True)
-        return
-    announce_compile([loop])
+    if not needs_compiling(prep.loop_key):
+        return None
+    sc = prep.scenario
+    what = f"the {sc.estimator or prep.config.estimator} + {sc.controller or prep.config.controller} loop ({sc.plant} plant)"
+    print(f"compiling {what} (once per machine: numba caches it for later runs) ...", file=sys.stderr, flush=True)
+    seconds = compile_loop(prep)
+    print(f"compiled {what} in {seconds:.1f} s", file=sys.stderr, flush=True)
+    return seconds
 
 
 def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
@@ -219,6 +194,7 @@ def _run(data, file, seed):
 
     prep = prepare(data, file=file, seed=seed)
     try:
+        ensure_compiled(prep)
         result = run_prepared(prep)
     except PlantDiverged as exc:
         raise UserError(f"{file}: {exc}") from None
@@ -252,7 +228,6 @@ def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path,
     summary["interrupted"] = len(done) < runs
     n_plant = len(result.columns["time_s"]) * int(result.meta["sample_time_s"] / result.meta["plant_step_s"] + 0.5)
     summary["vehicle_steps_per_s"] = len(done) * n_plant / wall if wall > 0 else None
-    summary["runs_in_lanes"] = sum(1 for r in done if r.get("lanes"))  # through the loop over lanes (built)
     write_monte_carlo(out / "monte_carlo", result.scenario.name, summary, done, result.columns["time_s"], notes=notes,
                       figures=figures)
     metrics = dict(metrics)
@@ -265,7 +240,6 @@ def _print_mc(summary: dict[str, Any]) -> None:
     n = summary["runs"]
     print(f"Monte Carlo: {n} runs in {summary['wall_time_s']:.2f} s"
           + (f" ({summary['vehicle_steps_per_s'] / 1e6:.1f} M vehicle-steps/s)" if summary.get("vehicle_steps_per_s") else "")
-          + (f", {summary['runs_in_lanes']} of them in lanes" if summary.get("runs_in_lanes") else "")
           + (" -- interrupted, partial results kept" if summary.get("interrupted") else ""))
     nees = summary.get("nees")
     if nees:
@@ -347,7 +321,6 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         raise UserError(f"--compare-runs must be >= 0, got {args.compare_runs}")
     out = Path(args.out)
     cases = ("step-observer-model", "step-process-model", "dropout")
-    checked_jit_mode()
     loops = [loop_of(*load_scenario_data(name)) for name in cases]
     if args.compare_runs > 0:
         loops += [loop_of(*load_scenario_data(name), controller=c) for name in _COMPARISONS for c in ("lqg", "mrac")]

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rovlab._jit import njit  # numba's, or plain in `rovlab filter` with built kernels
+from rovlab._jit import njit
 
 _TENS0 = 330
 _TENS = np.array([float(f"1e{j}") for j in range(-_TENS0, 310)])  # the double nearest 10^j (correctly rounded)
@@ -335,13 +335,10 @@ def csv_rows(columns: Sequence[np.ndarray | tuple[np.ndarray, Sequence[str]]],
     np.cumsum([len(s) for s in all_labels], out=lab_off[1:])
     out = np.empty(n * width, dtype=np.uint8)
     left = np.empty((64, 2), dtype=np.int64)  # values left to Python are rare
-    from rovlab import _aot  # built ahead of time when it is (no JIT start-up); else numba's
-
-    size, n_left = _aot.call("csv_rows", _rows, F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
+    size, n_left = _rows(F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
     if n_left > left.shape[0]:
         left = np.empty((n_left, 2), dtype=np.int64)
-        size, n_left = _aot.call("csv_rows", _rows, F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out,
-                                 left)
+        size, n_left = _rows(F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
     if not n_left:
         return out.data[:size]  # no copy: pages past size were never touched
     from rovlab.io.logs import round_significant

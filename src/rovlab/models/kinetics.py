@@ -29,7 +29,7 @@ import math
 import numpy as np
 
 from rovlab._jit import njit
-from rovlab.core.angles import SMALL_ANGLE, cos_sin_series, cos_sin_small
+from rovlab.core.angles import cos_sin_small
 from rovlab.params.vehicle import Vehicle
 
 # Layout of the packed parameter vector used by the compiled kernels.
@@ -316,38 +316,23 @@ def rk4_scalars(p, c, s, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, h):
     end within ~1e-14 m of evaluating sin and cos at every stage, with or without a current;
     tests/models/test_kinetics.py checks 1e-12) in ~35 % less time.
     """
-    r = rk4_stages(p, c, s, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, h, False)
-    return r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9]
-
-
-@njit(cache=True, inline="always")
-def rk4_stages(p, c, s, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, h, series):
-    """:func:`rk4_scalars`, plus an 11th value: whether every heading increment was within the
-    series' range (|d| <= 0.1). ``series`` True (a constant at the call site) takes the series
-    for every increment without a branch (rovlab.core.angles.cos_sin_series): the same numbers
-    as :func:`rk4_scalars` whenever that 11th value is True, and a loop over lanes of it is
-    vectorised (rovlab.sim.plant); the caller redoes a step where it is False."""
     k1 = rhs_cs(p, c, s, x2, x4, x5, x6, x7, f0, f1, f2, f3)
     hh = 0.5 * h
     d = hh * k1[3]
-    ok = abs(d) <= SMALL_ANGLE
-    cd, sd = cos_sin_series(d) if series else cos_sin_small(d)
+    cd, sd = cos_sin_small(d)
     k2 = rhs_cs(p, c * cd - s * sd, s * cd + c * sd, x2 + hh * k1[2],
                 x4 + hh * k1[4], x5 + hh * k1[5], x6 + hh * k1[6], x7 + hh * k1[7], f0, f1, f2, f3)
     d = hh * k2[3]
-    ok = ok & (abs(d) <= SMALL_ANGLE)
-    cd, sd = cos_sin_series(d) if series else cos_sin_small(d)
+    cd, sd = cos_sin_small(d)
     k3 = rhs_cs(p, c * cd - s * sd, s * cd + c * sd, x2 + hh * k2[2],
                 x4 + hh * k2[4], x5 + hh * k2[5], x6 + hh * k2[6], x7 + hh * k2[7], f0, f1, f2, f3)
     d = h * k3[3]
-    ok = ok & (abs(d) <= SMALL_ANGLE)
-    cd, sd = cos_sin_series(d) if series else cos_sin_small(d)
+    cd, sd = cos_sin_small(d)
     k4 = rhs_cs(p, c * cd - s * sd, s * cd + c * sd, x2 + h * k3[2],
                 x4 + h * k3[4], x5 + h * k3[5], x6 + h * k3[6], x7 + h * k3[7], f0, f1, f2, f3)
     h6 = h / 6.0
     turn = h6 * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
-    ok = ok & (abs(turn) <= SMALL_ANGLE)
-    cd, sd = cos_sin_series(turn) if series else cos_sin_small(turn)
+    cd, sd = cos_sin_small(turn)
     return (x0 + h6 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
             x1 + h6 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
             x2 + h6 * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]),
@@ -356,7 +341,7 @@ def rk4_stages(p, c, s, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3, h, serie
             x5 + h6 * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5]),
             x6 + h6 * (k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6]),
             x7 + h6 * (k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7]),
-            c * cd - s * sd, s * cd + c * sd, ok)
+            c * cd - s * sd, s * cd + c * sd)
 
 
 @njit(cache=True)

@@ -34,19 +34,14 @@ import numpy as np
 from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
-    LANE_SCRATCH_ROWS,
-    LANES,
     N_TRUTH,
     TRUTH_INDEX,
     controller_actuated,
     controller_step,
     estimator_correct,
     estimator_predict,
-    lane_of,
     plant_advance,
-    plant_advance_lanes,
     plant_truth,
-    register_lanes,
 )
 from rovlab.estimation.fusion import CH_REASON, CH_STATUS, EVENT_USED, N_REP, REP_EVENT, REP_INNOV, REP_S
 from rovlab.models.sensors import sample_sensors
@@ -165,9 +160,6 @@ def _to_plant(k, row, t, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive
     P = est.P
     ch = est.ch
     cstate = ctrl.state
-    # Every array written is bound to a name first: written as logs.truth[row, i] = ..., the
-    # stores were lost when this function was inlined into run_loop_lanes (numba 0.68), whose
-    # logs are built in the loop (lane views), not passed in.
     log_truth, log_y, log_status, log_reason = logs.truth, logs.y, logs.status, logs.reason
     log_x, log_P = logs.x, logs.P
     log_wrench, log_pwm, log_cons, log_ctrl = logs.wrench, logs.pwm, logs.cons, logs.ctrl
@@ -243,90 +235,6 @@ def run_loop(k0, k1, h, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive,
     return k1 - k0
 
 
-class Lanes(NamedTuple):
-    """What :func:`run_loop_lanes` keeps per lane besides the components (:func:`new_lanes`)."""
-
-    tau_cmd: np.ndarray  # (LANES, 4) the wrench each lane's allocation achieved this step
-    tau_real: np.ndarray  # (LANES, 4) the wrench each lane's thrusters really give
-    active: np.ndarray  # (LANES) bool: the lane is running (False: its plant diverged, or no run in it)
-    done: np.ndarray  # (LANES) int64: rows each lane did (set when it stops or the chunk ends)
-    scratch: np.ndarray  # (LANE_SCRATCH_ROWS * LANES) the plant's lanes kernel's work (rovlab.sim.plant)
-
-
-def new_lanes(used: int) -> Lanes:
-    """Lanes with the first ``used`` of LANES running."""
-    active = np.zeros(LANES, dtype=np.bool_)
-    active[:used] = True
-    return Lanes(np.zeros((LANES, 4)), np.zeros((LANES, 4)), active, np.zeros(LANES, dtype=np.int64),
-                 np.zeros(LANE_SCRATCH_ROWS * LANES))
-
-
-def stacked_drive(drives: list[Drive]) -> Drive:
-    """The drives of runs that differ only by their seed, stacked for the lanes: the random draws
-    with a leading lane axis, the schedule (drop-outs, references, disturbances) the first's;
-    rovlab.core.components.lane_of gives a lane's Drive back."""
-    first = drives[0]
-    return first._replace(plant_normals=np.stack([d.plant_normals for d in drives]),
-                          bias_normals=np.stack([d.bias_normals for d in drives]),
-                          sensor_normals=np.stack([d.sensor_normals for d in drives]))
-
-
-def new_stacked_logs(lanes: int, n: int, m: int, n_x: int, n_thrusters: int, n_ctrl_state: int) -> Logs:
-    return Logs(np.empty((lanes, n, N_TRUTH)), np.empty((lanes, n, m)), np.empty((lanes, n, m)),
-                np.empty((lanes, n, m)), np.empty((lanes, n, n_x)), np.empty((lanes, n, n_x, n_x)),
-                np.empty((lanes, n, N_WRENCH_LOG)), np.empty((lanes, n, n_thrusters)), np.empty((lanes, n, 3)),
-                np.empty((lanes, n, n_ctrl_state)))
-
-
-# the drives' draws and the logs have a leading lane axis in run_loop_lanes (lane_of gives a run's)
-register_lanes(Drive, stacked=("plant_normals", "bias_normals", "sensor_normals"))
-register_lanes(Logs, stacked=Logs._fields)
-
-
-@njit(cache=True, **WITHOUT_NRT)
-def run_loop_lanes(k0, k1, h, plants, sensors, ests, ctrls, act, nav_of, nees_idx, drives, log_stack, work, lanes):
-    """:func:`run_loop` for up to LANES runs at once (a Monte Carlo's lanes) that differ only by
-    their seed: ``plants``, ``ests`` and ``ctrls`` are the runs' components stacked
-    (rovlab.core.components.stacked), ``drives`` their drives (:func:`stacked_drive`) and
-    ``log_stack`` their logs (:func:`new_stacked_logs`), lane i being run i; the sensors, the
-    actuators and ``work`` are shared (their arrays hold nothing from one step to the next).
-    Each step does steps 1-6 lane by lane, then advances every lane's plant together
-    (plant_advance_lanes: one vectorised RK4 for the process plant), and every lane gets
-    exactly the logs of its run through run_loop. Lanes whose ``lanes.active`` is False are not
-    touched; a lane whose plant diverges stops there. ``lanes.done`` receives the rows each lane
-    did; returns the rows done by the longest.
-
-    (No argument is named like one of _to_plant's that it is not: numba 0.68's inliner confused
-    this loop's stacked ``logs`` with _to_plant's ``logs`` and lost every log write.)"""
-    n_lanes = lanes.active.shape[0]
-    active = lanes.active
-    done = lanes.done
-    work.nav[:] = 0.0
-    for k in range(k0, k1):
-        row = k - k0
-        t = k * h
-        running = 0
-        for lane in range(n_lanes):
-            if active[lane]:
-                ok = _to_plant(k, row, t, lane_of(plants, lane), sensors, lane_of(ests, lane), lane_of(ctrls, lane),
-                               act, nav_of, nees_idx, lane_of(drives, lane), lane_of(log_stack, lane), work)
-                if ok:
-                    for i in range(4):
-                        lanes.tau_cmd[lane, i] = work.tau_cmd[i]
-                        lanes.tau_real[lane, i] = work.tau_real[i]
-                    running += 1
-                else:
-                    active[lane] = False
-                    done[lane] = row
-        if running == 0:
-            return row
-        plant_advance_lanes(plants, drives, row, lanes)
-    for lane in range(n_lanes):
-        if active[lane]:
-            done[lane] = k1 - k0
-    return k1 - k0
-
-
 # What numba says when code compiled without reference counting (the loop, and what it inlines or
 # compiles for it) needs the runtime's memory: a new array, list or string, or an exception built
 # from a value known only at run time.
@@ -378,12 +286,9 @@ class explain_allocation:
 run_loop_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(run_loop, "py_func", run_loop))
 
 
-run_loop_lanes_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(run_loop_lanes, "py_func", run_loop_lanes))
-
-
-def loop_for(*components: object, lanes: bool = False):
-    """The loop to call for these components (``lanes``: :func:`run_loop_lanes`): the
-    disk-cached one when every component class is rovlab's own, else the per-process copy."""
+def loop_for(*components: object):
+    """The loop to call for these components: the disk-cached one when every component class is
+    rovlab's own, else the per-process copy."""
     if all(type(c).__module__.startswith("rovlab.") for c in components):
-        return run_loop_lanes if lanes else run_loop
-    return run_loop_lanes_uncached if lanes else run_loop_uncached
+        return run_loop
+    return run_loop_uncached

@@ -3,16 +3,12 @@
 Run i uses seed ``base_seed + i``; its distributions and all its noise are drawn from that seed
 alone, so ``rovlab simulate SCENARIO --seed S`` replays any run. The scenario is resolved and
 designed once per process (:class:`Campaign`); each run then only redraws what its seed decides.
-Runs go to a pool of forked worker processes (stdlib ``concurrent.futures``; the parent designs
-and runs the first seed before the fork, so the workers start with the design and the compiled
-loop ready) or, with ``backend="dask"``, to a Dask cluster. Workers return only the metrics and
-the NEES/NIS series, not the full logs.
-
-Within a process, runs of a scenario without distributions go through the loop over lanes
-(rovlab.sim.loop.run_loop_lanes) LANES at a time once it is built ahead of time: the plants of
-sixteen runs are integrated together in vector instructions, with exactly the numbers of each
-run alone. Until it is built (in the background, after the first Monte Carlo that could use
-it) the runs go one by one.
+Runs go to a pool of worker processes (stdlib ``concurrent.futures``; the parent designs and
+runs the first seed first, which compiles the loop or loads it from numba's cache, so the workers
+find it in the cache) or, with ``backend="dask"``, to a Dask cluster. The pool's workers are
+forked where the platform offers it (they inherit the design and the loaded loop) and spawned
+elsewhere (macOS, Windows; or ``start_method="spawn"``): a spawned worker designs once and loads
+the loop from the cache. Workers return only the metrics and the NEES/NIS series, not the logs.
 """
 
 from __future__ import annotations
@@ -27,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from rovlab.core.components import LANES
 from rovlab.sim import metrics as mx
 
 
@@ -42,7 +37,6 @@ class Campaign:
         from rovlab.sim.scenario import has_distributions
 
         self.data, self.file = data, file
-        self.lanes: bool | None = None  # whether the loop over lanes ran here (None: not tried yet)
         self.book = DesignBook()
         self.template = None if has_distributions(data) else prepare(data, file=file, seed=first_seed, book=self.book)
 
@@ -59,67 +53,26 @@ class Campaign:
 
         return _outcome(seed, run_prepared(self.prepared(seed)))
 
-    def run_group(self, seeds: Sequence[int], each: Callable[[dict[str, Any]], None] | None = None
-                  ) -> list[dict[str, Any]]:
-        """The runs of up to LANES seeds (:meth:`run` of each, in order): together through the loop
-        over lanes when it is built, the scenario has no distributions and ROVLAB_LANES is not 0,
-        else one by one. ``each`` is called with every result as soon as it is there."""
-        from rovlab.sim.runner import result_of, run_lanes, run_prepared
-
+    def run_all(self, seeds: Sequence[int], each: Callable[[dict[str, Any]], None] | None = None
+                ) -> list[dict[str, Any]]:
+        """:meth:`run` of each seed, in order; ``each`` is called with every result as soon as it
+        is there."""
         out: list[dict[str, Any]] = []
-        preps = None
-        if self.template is not None and len(seeds) >= 2 and self.lanes is not False and lanes_enabled():
-            preps = [self.prepared(s) for s in seeds]
-            started = time.time()
-            logs = run_lanes(preps, request=False)
-            self.lanes = logs is not None  # not built: not looked for again in this process
-            if logs is not None:
-                for s, prep, lg in zip(seeds, preps, logs):
-                    out.append(_outcome(s, result_of(prep, lg, started), lanes=True))
-                    if each is not None:
-                        each(out[-1])
-                return out
-        for i, s in enumerate(seeds):
-            out.append(self.run(s) if preps is None else _outcome(s, run_prepared(preps[i])))
+        for s in seeds:
+            out.append(self.run(s))
             if each is not None:
                 each(out[-1])
         return out
 
-    def run_all(self, seeds: Sequence[int]) -> list[dict[str, Any]]:
-        """:meth:`run_group` over the seeds, LANES at a time."""
-        from rovlab.core.components import LANES
 
-        out: list[dict[str, Any]] = []
-        for i in range(0, len(seeds), LANES):
-            out.extend(self.run_group(seeds[i:i + LANES]))
-        return out
-
-    def request_lanes(self) -> str | None:
-        """Start building the loop over lanes for this scenario in the background (once; nothing
-        if it is built, disabled or the scenario has distributions)."""
-        from rovlab.sim.runner import request_lanes, reseed
-
-        if self.template is None or not lanes_enabled():
-            return None
-        return request_lanes([reseed(self.template, s) for s in (0, 1)])
-
-
-def lanes_enabled() -> bool:
-    """Whether Monte Carlo runs may go through the loop over lanes (ROVLAB_LANES=0: never)."""
-    from rovlab import _jit
-
-    return os.environ.get("ROVLAB_LANES", "1").strip() != "0" and _jit.lanes_supported()
-
-
-def _outcome(seed: int, result: Any, *, lanes: bool = False) -> dict[str, Any]:
+def _outcome(seed: int, result: Any) -> dict[str, Any]:
     """What a worker returns of a run: its metrics (metrics.json of the run), flattened for the
-    statistics, its NEES/NIS series, and whether it ran in lanes."""
+    statistics, and its NEES/NIS series."""
     from rovlab.sim.runner import summarise
 
     metrics = summarise(result)
     # flattened here, in the worker, rather than by summarise_runs in the parent after the runs
-    return {"seed": seed, "metrics": metrics, "nees": result.nees, "nis": result.nis, "flat": _flatten(metrics),
-            "lanes": lanes}
+    return {"seed": seed, "metrics": metrics, "nees": result.nees, "nis": result.nis, "flat": _flatten(metrics)}
 
 
 def _chunk(data: Mapping[str, Any], file: str, seeds: Sequence[int]) -> list[dict[str, Any]]:
@@ -133,7 +86,7 @@ _worker: Campaign | None = None  # the campaign of a pool worker process (set by
 
 def _init_worker(campaign: Campaign | None, data: Mapping[str, Any], file: str, first_seed: int) -> None:
     """Pool worker start: a forked worker inherits the parent's campaign (designed, compiled loop
-    loaded); a spawned one builds its own, once."""
+    loaded); a spawned one builds its own, once (the loop then loads from numba's cache)."""
     global _worker
     _worker = campaign if campaign is not None else Campaign(data, file, first_seed)
 
@@ -147,10 +100,12 @@ def _worker_chunk(seeds: Sequence[int]) -> list[dict[str, Any]]:
 def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, workers: int | None = None,
              backend: str = "processes", scheduler: str | None = None,
              progress: Callable[[int, int], None] | None = None,
-             meanwhile: Callable[[], None] | None = None) -> list[dict[str, Any]]:
+             meanwhile: Callable[[], None] | None = None, start_method: str | None = None) -> list[dict[str, Any]]:
     """Run the scenario once per seed; results in seed order. ``meanwhile`` is the caller's own
     work (e.g. writing the files of its single run), done in this process while the workers run
-    (before the runs when there are no workers); an error in it stops the runs and is raised."""
+    (before the runs when there are no workers); an error in it stops the runs and is raised.
+    ``start_method``: how the pool starts its workers (multiprocessing's "fork", "spawn" or
+    "forkserver"; default: "fork" where the platform has it, else its default)."""
     seeds = list(seeds)
     workers = max(1, workers or os.cpu_count() or 1)
     if backend == "dask":
@@ -173,12 +128,9 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
                 progress(len(out), n)
 
         try:
-            for i in range(0, n, LANES):
-                campaign.run_group(seeds[i:i + LANES], keep)
+            campaign.run_all(seeds, keep)
         except KeyboardInterrupt:  # keep what finished, as the parallel path does
             print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
-            return out
-        campaign.request_lanes()
         return out
     # the first run here: it loads the compiled loop before the fork, so no worker pays for it
     results: dict[int, dict[str, Any]] = {}
@@ -187,8 +139,10 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     done = 1
     rest = seeds[1:]
     chunks = _guided_chunks(rest, workers)
-    fork = "fork" in mp.get_all_start_methods()
-    ctx = mp.get_context("fork") if fork else mp.get_context()
+    if start_method is None:
+        start_method = "fork" if "fork" in mp.get_all_start_methods() else None
+    ctx = mp.get_context(start_method)
+    fork = ctx.get_start_method() == "fork"
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=_init_worker,
                                initargs=(campaign if fork else None, data, file, seeds[0]))
     futures = [pool.submit(_worker_chunk, c) for c in chunks]
@@ -215,7 +169,6 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
         print(f"\ninterrupted: keeping {done} of {n} runs", file=sys.stderr)
         return [results[s] for s in seeds if s in results]
     pool.shutdown()
-    campaign.request_lanes()  # after the runs, not during them: the build takes a core for a minute
     return [results[s] for s in seeds]
 
 
@@ -232,14 +185,11 @@ def _stop(pool: ProcessPoolExecutor, futures: list) -> None:
 def _guided_chunks(seeds: Sequence[int], workers: int, *, largest: int = 96, smallest: int = 1) -> list[list[int]]:
     """Chunks of seeds for the pool, each a share of what is left (guided scheduling): long chunks
     first (few round trips), short ones at the end, so that no worker idles while another finishes
-    a long last chunk; the progress bar moves throughout. Chunks longer than LANES are whole
-    multiples of it (the lanes are full)."""
+    a long last chunk; the progress bar moves throughout."""
     out = []
     i, n = 0, len(seeds)
     while i < n:
         size = max(smallest, min(largest, (n - i) // (workers * 4)))
-        if size > LANES:
-            size -= size % LANES
         out.append(list(seeds[i:i + size]))
         i += size
     return out
@@ -273,8 +223,6 @@ def _run_dask(data, file, seeds, scheduler, progress, meanwhile=None):
     try:
         workers = max(1, len(client.scheduler_info().get("workers", {})))
         size = max(1, min(48, n // (workers * 4) or 1))
-        if size > LANES:  # whole groups of lanes (where the lanes loop is built on the worker)
-            size -= size % LANES
         chunks = [seeds[i:i + size] for i in range(0, n, size)]
         futures = [client.submit(_chunk, data, file, c, pure=False) for c in chunks]
         if meanwhile is not None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -25,14 +25,11 @@ import numpy as np
 from rovlab import _jit
 from rovlab.allocation.solvers import Allocator
 from rovlab.core.components import (
-    LANES,
     TRUTH_INDEX,
     ControllerSpec,
     EstimatorSpec,
     fresh,
     plant_draws,
-    stacked,
-    state_fields,
 )
 from rovlab.models import kinetics as kin
 from rovlab.models.discretise import discretise
@@ -43,24 +40,9 @@ from rovlab.params.design import DesignConfig, load_design_config
 from rovlab.params.validate import ConfigError, Problem
 from rovlab.params.vehicle import Vehicle, load_vehicle
 from rovlab.sim import metrics as mx
-from rovlab.sim import prebuilt
 from rovlab.sim.actuators import Actuators, make_actuators
 from rovlab.sim.components import build_pair
-from rovlab.sim.loop import (
-    Drive,
-    Lanes,
-    Logs,
-    draw,
-    explain_allocation,
-    loop_for,
-    new_lanes,
-    new_logs,
-    new_stacked_logs,
-    new_work,
-    run_loop,
-    run_loop_lanes,
-    stacked_drive,
-)
+from rovlab.sim.loop import Drive, Logs, draw, explain_allocation, loop_for, new_logs, new_work
 from rovlab.sim.plant import ObserverPlant, ProcessPlant
 from rovlab.sim.scenario import Scenario, scenario_from_dict
 
@@ -141,21 +123,8 @@ class DesignBook:
         key = (id(vehicle), id(config), *sorted(kw.items()))
         hit = self._designs.get(key)
         if hit is None or hit.vehicle is not vehicle or hit.config is not config:
-            hit = self._designs[key] = stored_design(vehicle, config, **kw)
+            hit = self._designs[key] = make_design(vehicle, config, **kw)
         return hit
-
-
-def stored_design(vehicle: Vehicle, config: DesignConfig, **kw: Any) -> Design:
-    """:func:`make_design`, kept on disk after the first time (rovlab.core.store): a process that
-    loads it imports neither scipy.linalg (~0.1 s) nor designs (the Riccati equations, the
-    discretisations). A refused design raises every time (never stored)."""
-    from rovlab.core.store import stored
-
-    design = stored("sim-", (vehicle, config, sorted(kw.items())), lambda: make_design(vehicle, config, **kw), Design)
-    # the caller's own vehicle and configuration (equal to the stored ones), so that
-    # DesignBook.design recognises the design as theirs and does not load it again
-    return design if design.vehicle is vehicle and design.config is config else \
-        replace(design, vehicle=vehicle, config=config)
 
 
 # --------------------------------------------------------------------------------------------
@@ -447,7 +416,6 @@ class Simulation:
         self.controller = fresh(prep.design.controller.kernel)
         self.work = new_work(len(prep.channels), prep.nees_idx.shape[0], prep.actuators.rows.shape[0])
         self.k = 0
-        self._marked = False
 
     def components(self) -> dict[str, Any]:
         """The stateful components by slot (for saving/restoring state, rovlab.core.components)."""
@@ -463,29 +431,16 @@ class Simulation:
         return (self.plant, prep.sensors, self.estimator, self.controller, prep.actuators, prep.nav_of,
                 prep.nees_idx, drive, logs, self.work)
 
-    def advance(self, drive: Drive, *, built: bool = True) -> Logs:
-        """Run len(drive.refs) control steps; ``built=False``: through numba's JIT even when the
-        loop is built ahead of time (rovlab.sim.warm compiles it)."""
+    def advance(self, drive: Drive) -> Logs:
+        """Run len(drive.refs) control steps (the loop is compiled, or loaded from numba's cache,
+        on the first call of a process for its combination of components)."""
         prep = self.prep
         n = drive.refs.shape[0]
         args = self.loop_arguments(drive)
         logs = args[_LOGS]
         loop = loop_for(self.plant, self.estimator, self.controller)
-        # the loop built ahead of time when it is (no JIT start-up: rovlab.sim.prebuilt)
-        fast = prebuilt.runner(args) if built and loop is run_loop else None
-        if fast is None and _jit.without_numba():
-            raise prebuilt.NotBuilt(f"no loop built ahead of time takes the components of {prep.loop_key} "
-                                    "as this run makes them")
-        t0 = time.perf_counter()
         with explain_allocation((self.plant, self.estimator, self.controller)):
-            if fast is not None:
-                done = fast(self.k, self.k + n, prep.h)
-            else:
-                done = loop(self.k, self.k + n, prep.h, *args)
-        if fast is None and loop is run_loop and not self._marked:  # compiled or loaded from the disk cache
-            self._marked = True
-            _jit.mark_compiled(prep.loop_key, time.perf_counter() - t0)
-            prebuilt.request(args, prep.loop_key)  # build it ahead of time for the next processes (background, once)
+            done = loop(self.k, self.k + n, prep.h, *args)
         self.k += done
         if done < n:
             raise PlantDiverged(self.k * prep.h, logs, done)
@@ -493,89 +448,6 @@ class Simulation:
 
 
 _LOGS = 8  # position of the logs in Simulation.loop_arguments
-
-
-def lane_arguments(preps: Sequence[Prepared]) -> tuple[tuple[Any, ...], Lanes, list[Logs]]:
-    """run_loop_lanes' arguments after (k0, k1, h), without the lanes' record, for up to LANES
-    runs of one prepared scenario that differ only by their seed (:func:`reseed` of one
-    Prepared: the design, plant parameters, sensors, actuators and schedule are shared), each
-    from its initial state; with the lanes' record and each run's logs (views of the stacked
-    logs the loop fills)."""
-    n = len(preps)
-    if not 1 <= n <= LANES:
-        raise ValueError(f"lanes take 1 to {LANES} runs, got {n}")
-    first = preps[0]
-    for prep in preps[1:]:
-        if not _reseeded(first, prep):
-            raise ValueError("lanes take runs of one prepared scenario that differ only by their seed (runner.reseed)")
-    sims = [Simulation(prep) for prep in preps]
-    est, ctl = sims[0].estimator, sims[0].controller
-    stack = new_stacked_logs(n, first.n_ctrl, len(first.channels), est.x.shape[0],
-                             first.actuators.rows.shape[0], ctl.state.shape[0])
-    args = (stacked([sim.plant for sim in sims]), first.sensors, stacked([sim.estimator for sim in sims]),
-            stacked([sim.controller for sim in sims]), first.actuators, first.nav_of, first.nees_idx,
-            stacked_drive([prep.drive for prep in preps]), stack, sims[0].work)
-    return args, new_lanes(n), [Logs(*(field[i] for field in stack)) for i in range(n)]
-
-
-def request_lanes(preps: Sequence[Prepared]) -> str | None:
-    """Start building the loop over lanes for these runs' combination ahead of time, in the
-    background (rovlab.sim.prebuilt.request: once, and not if it is built or disabled); the log
-    of the build, or None."""
-    if not prebuilt.enabled():
-        return None
-    args, lanes, _ = lane_arguments(preps)
-    if loop_for(args[0], args[2], args[3], lanes=True) is not run_loop_lanes:
-        return None  # components defined outside rovlab: their loop is not cached, nor built
-    return prebuilt.request((*args, lanes), preps[0].loop_key, "run_loop_lanes")
-
-
-def _reseeded(a: Prepared, b: Prepared) -> bool:
-    """Whether b is a (another seed's) run of the same Prepared as a: everything but the plant's
-    state and the draws shared (what the lanes share)."""
-    pa, pb = a.plant, b.plant
-    shared = all(getattr(pa, f) is getattr(pb, f) for f in type(pa)._fields if f not in state_fields(pa))
-    da, db = a.drive, b.drive
-    return (shared and type(pa) is type(pb) and a.design is b.design and a.sensors is b.sensors
-            and a.actuators is b.actuators and a.n_ctrl == b.n_ctrl and a.h == b.h
-            and da.dropout is db.dropout and da.refs is db.refs and da.heave_force is db.heave_force
-            and da.pset is db.pset and a.nav_of is b.nav_of and a.nees_idx is b.nees_idx)
-
-
-def run_lanes(preps: Sequence[Prepared], *, built: bool = True, request: bool = True) -> list[Logs] | None:
-    """Run up to LANES runs of one prepared scenario that differ only by their seed together
-    through the loop over lanes (rovlab.sim.loop.run_loop_lanes), from start to end; their logs
-    are exactly those each gets alone (:func:`run_prepared`). ``built`` (the default): only
-    through the loop built ahead of time, returning None when it is not built yet (its build
-    is then started in the background, rovlab.sim.prebuilt; the caller runs them one by one);
-    ``built=False``: through numba's JIT (compiled on first use, about as long as the loop).
-    ``request=False`` does not start the build.
-    Raises PlantDiverged for the first run whose plant diverged."""
-    if built and not prebuilt.enabled():
-        return None  # (before stacking anything: the caller runs them one by one)
-    args, lanes, logs = lane_arguments(preps)
-    first = preps[0]
-    loop_args = (*args, lanes)
-    loop = loop_for(args[0], args[2], args[3], lanes=True)
-    if built:
-        fast = prebuilt.runner(loop_args, "run_loop_lanes") if loop is run_loop_lanes else None
-        if fast is None:
-            if request:
-                request_lanes(preps)
-            return None
-        fast(0, first.n_ctrl, first.h)
-    else:
-        if _jit.without_numba():
-            raise prebuilt.NotBuilt("the loop over lanes is not built and this process runs without numba")
-        if not _jit.lanes_supported():
-            raise RuntimeError("the loop over lanes cannot run correctly with this numba (rovlab._jit.lanes_supported)")
-        with explain_allocation((args[0], args[2], args[3])):
-            loop(0, first.n_ctrl, first.h, *loop_args)
-    for i, prep in enumerate(preps):
-        rows = int(lanes.done[i])
-        if rows < prep.n_ctrl:
-            raise PlantDiverged(rows * prep.h, logs[i], rows)
-    return logs
 
 
 def columns(prep: Prepared, logs: Logs, times: np.ndarray, refs: np.ndarray) -> dict[str, np.ndarray]:
