@@ -60,5 +60,6 @@ bench: $(STAMP)
 clean: clean-cache
 	rm -rf $(VENV) $(VENV_ROS2) $(VENV_ROS1) out build src/*.egg-info
 
+# numba's cache files of rovlab's kernels (in __pycache__ next to the sources; rovlab._jit)
 clean-cache:
-	rm -rf $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/numba $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/design $${XDG_CACHE_HOME:-$$HOME/.cache}/rovlab/aot
+	find src/rovlab -path '*/__pycache__/*' \( -name '*.nbi' -o -name '*.nbc' -o -name 'rovlab-*' \) -delete

