@@ -4,6 +4,7 @@ function; this file only assembles them and turns user errors into clean message
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import sys
 from collections.abc import Sequence
@@ -71,8 +72,10 @@ def _parser_for(argv: Sequence[str]) -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The ``rovlab`` command: ``argv`` (default: this process's command line)."""
     from rovlab.params.validate import ConfigError
 
+    command_line = argv is None  # the rovlab command itself, not a call from a script or notebook
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = _parser_for(argv)
     args = parser.parse_args(argv)
@@ -86,6 +89,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except BrokenPipeError:
         return 0
+    finally:
+        if command_line:
+            # The process ends now: move what it made (numba's ~100 000 objects) out of the garbage
+            # collector's sight, so that the interpreter's final collection does not walk them all
+            # (0.13 s of every command that ran a compiled kernel, measured on the 2-core machine).
+            gc.freeze()
 
 
 if __name__ == "__main__":  # pragma: no cover
