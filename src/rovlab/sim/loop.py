@@ -33,23 +33,12 @@ import numpy as np
 
 from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.core.angles import wrap_angle
-from rovlab.core.components import (
-    N_TRUTH,
-    TRUTH_INDEX,
-    controller_actuated,
-    controller_step,
-    estimator_correct,
-    estimator_predict,
-    plant_advance,
-    plant_truth,
-)
+from rovlab.core.components import N_TRUTH, TRUTH_INDEX, plant_advance
 from rovlab.estimation.fusion import CH_REASON, CH_STATUS, EVENT_USED, N_REP, REP_EVENT, REP_INNOV, REP_S
-from rovlab.models.sensors import sample_sensors
-from rovlab.sim.actuators import actuate
+from rovlab.sim.step import command, estimate, plant_sample
 
 N_WRENCH_LOG = 8  # allocated X, Y, Z, N, then demanded X, Y, Z, N
 _PSI = TRUTH_INDEX["psi"]
-_DIVERGED = 1e9  # a true state beyond this (or not finite) means the plant has diverged
 
 
 class Drive(NamedTuple):
@@ -145,72 +134,55 @@ def _nees(err, P, idx, L):
 
 @njit(cache=True, inline="always")
 def _to_plant(k, row, t, plant, sensors, est, ctrl, act, nav_of, nees_idx, drive, logs, work):
-    """Steps 1-6 of control step k (module docstring), up to the plant's advance: the truth, the
-    samples, the estimator's correction, the controller, the allocation and the estimator's
-    prediction, each logged at ``row``. The wrench the plant is to feel is left in
-    work.tau_cmd / work.tau_real. Returns False, logging nothing, when the plant's true state is
-    no longer finite (or beyond 1e9)."""
-    n = est.x.shape[0]
+    """Steps 1-6 of control step k (module docstring), up to the plant's advance: the truth and
+    the samples (rovlab.sim.step.plant_sample), the estimator's correction
+    (rovlab.sim.step.estimate), the controller, the allocation and the estimator's prediction
+    (rovlab.sim.step.command: the vehicle node's control step is the same two halves), each
+    logged at ``row``. The wrench the plant is to feel is left in work.tau_cmd / work.tau_real.
+    Returns False, logging nothing, when the plant's true state is no longer finite (or beyond
+    1e9)."""
     m = sensors.quantity.shape[0]
     nt = act.rows.shape[0]
     n_nees = nees_idx.shape[0]
     rep, y, present, truth, nav, err, chol = work.rep, work.y, work.present, work.truth, work.nav, work.err, work.chol
     tau, tau_cmd, tau_real, pwm = work.tau, work.tau_cmd, work.tau_real, work.pwm
-    x = est.x
-    P = est.P
-    ch = est.ch
-    cstate = ctrl.state
     log_truth, log_y, log_status, log_reason = logs.truth, logs.y, logs.status, logs.reason
     log_x, log_P = logs.x, logs.P
     log_wrench, log_pwm, log_cons, log_ctrl = logs.wrench, logs.pwm, logs.cons, logs.ctrl
     # -- truth and sensors at t_k ---------------------------------------------------------
-    plant_truth(plant, truth)
-    finite = True
+    if not plant_sample(k, plant, sensors, drive, row, truth, y, present):
+        return False  # the plant diverged (absurd parameters or forces): stop, rows 0..row-1 hold
     for i in range(N_TRUTH):
-        finite = finite and abs(truth[i]) < _DIVERGED
-    if finite:  # else the plant diverged (absurd parameters or forces): stop, rows 0..row-1 hold
-        for i in range(N_TRUTH):
-            log_truth[row, i] = truth[i]
-        sample_sensors(sensors, truth, k, drive.sensor_normals, drive.dropout, row, y, present)
-        for j in range(m):
-            log_y[row, j] = y[j]
-        # -- estimator: correct -------------------------------------------------------------
-        estimator_correct(est, t, y, present, rep)
-        for i in range(n):
-            log_x[row, i] = x[i]
-            for jj in range(n):
-                log_P[row, i, jj] = P[i, jj]
-        nis = 0.0
-        used = 0
-        for j in range(m):
-            log_status[row, j] = ch[j, CH_STATUS]
-            log_reason[row, j] = ch[j, CH_REASON]
-            if rep[j, REP_EVENT] == EVENT_USED:
-                nis += rep[j, REP_INNOV] ** 2 / rep[j, REP_S]
-                used += 1
-        log_cons[row, 0] = nis
-        log_cons[row, 1] = used
-        for a in range(n_nees):
-            i = nees_idx[a]
-            e = x[i] - truth[nav_of[i]]
-            err[a] = wrap_angle(e) if nav_of[i] == _PSI else e
-        log_cons[row, 2] = _nees(err, P, nees_idx, chol)
-        # -- controller, allocation and thrusters ---------------------------------------------
-        for i in range(n):
-            nav[nav_of[i]] = x[i]
-        controller_step(ctrl, t, nav, drive.refs[row], tau)
-        actuate(act, tau, tau_cmd, tau_real, pwm)
-        for i in range(nt):
-            log_pwm[row, i] = pwm[i]
-        for i in range(4):
-            log_wrench[row, i] = tau_cmd[i]
-            log_wrench[row, 4 + i] = tau[i]
-        for i in range(cstate.shape[0]):
-            log_ctrl[row, i] = cstate[i]
-        # -- estimator: predict; controller: what was achieved ---------------------------------
-        estimator_predict(est, t, tau_cmd)
-        controller_actuated(ctrl, t, tau, tau_cmd)
-    return finite
+        log_truth[row, i] = truth[i]
+    for j in range(m):
+        log_y[row, j] = y[j]
+    # -- estimator: correct -----------------------------------------------------------------
+    x_row = log_x[row]
+    estimate(t, est, nav_of, y, present, rep, nav, x_row, log_P[row])
+    ch = est.ch
+    nis = 0.0
+    used = 0
+    for j in range(m):
+        log_status[row, j] = ch[j, CH_STATUS]
+        log_reason[row, j] = ch[j, CH_REASON]
+        if rep[j, REP_EVENT] == EVENT_USED:
+            nis += rep[j, REP_INNOV] ** 2 / rep[j, REP_S]
+            used += 1
+    log_cons[row, 0] = nis
+    log_cons[row, 1] = used
+    for a in range(n_nees):
+        i = nees_idx[a]
+        e = x_row[i] - truth[nav_of[i]]
+        err[a] = wrap_angle(e) if nav_of[i] == _PSI else e
+    log_cons[row, 2] = _nees(err, log_P[row], nees_idx, chol)
+    # -- controller, allocation and thrusters; estimator: predict ----------------------------
+    command(t, est, ctrl, act, drive.refs[row], True, nav, tau, tau_cmd, tau_real, pwm, log_ctrl[row])
+    for i in range(nt):
+        log_pwm[row, i] = pwm[i]
+    for i in range(4):
+        log_wrench[row, i] = tau_cmd[i]
+        log_wrench[row, 4 + i] = tau[i]
+    return True
 
 
 @njit(cache=True, **WITHOUT_NRT)

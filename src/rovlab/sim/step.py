@@ -47,21 +47,16 @@ class StepOut(NamedTuple):
     pwm: np.ndarray  # (thrusters) PWM commands [us]
     x: np.ndarray  # (n) corrected estimate
     P: np.ndarray  # (n, n) its covariance
+    ctrl: np.ndarray  # (len(controller state)) the controller's state after its command (what the loop logs)
 
 
-@njit(cache=True, **WITHOUT_NRT)  # no reference counting, no allocation: as rovlab.sim.loop.run_loop
-def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, out):
-    """One control step at time t [s] with the samples y (NaN where ``present`` is False).
+# The two halves of a control step, shared by the simulator's loop (rovlab.sim.loop, which logs
+# between them) and the vehicle's control step below: one body for both.
 
-    Fills the arrays of ``out`` (:class:`StepOut`): the estimator's per-channel report, the
-    corrected estimate and covariance at t, the estimate in the TRUTH layout the controller
-    reads, the demanded wrench, the wrench the allocation achieved, what the PWM commands give on
-    the model vehicle and the PWM commands. With ``engaged`` False the controller is not run and
-    the demanded wrench is zero (neutral thrusters); the estimator still corrects and predicts
-    with the zero wrench.
-    """
-    rep, nav, tau, tau_cmd, tau_real, pwm, x_out, P_out = (out.rep, out.nav, out.tau, out.tau_cmd, out.tau_real,
-                                                            out.pwm, out.x, out.P)
+@njit(cache=True, inline="always")
+def estimate(t, est, nav_of, y, present, rep, nav, x_out, P_out):
+    """Correct the estimator with the samples y (NaN where ``present`` is False); the corrected
+    estimate and covariance into x_out / P_out, and into ``nav`` in the TRUTH layout."""
     estimator_correct(est, t, y, present, rep)
     n = est.x.shape[0]
     for i in range(n):
@@ -69,15 +64,42 @@ def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, out):
         for j in range(n):
             P_out[i, j] = est.P[i, j]
         nav[nav_of[i]] = est.x[i]
+
+
+@njit(cache=True, inline="always")
+def command(t, est, ctrl, act, ref, engaged, nav, tau, tau_cmd, tau_real, pwm, ctrl_out):
+    """The controller's demand from ``nav`` and ``ref`` (zero when not ``engaged``: neutral
+    thrusters), the allocation and PWM commands, the controller's state into ``ctrl_out``, then the
+    estimator's prediction with the achieved wrench and the controller told what was achieved."""
     if engaged:
         controller_step(ctrl, t, nav, ref, tau)
     else:
         for i in range(4):
             tau[i] = 0.0
     actuate(act, tau, tau_cmd, tau_real, pwm)
+    state = ctrl.state
+    for i in range(state.shape[0]):
+        ctrl_out[i] = state[i]
     estimator_predict(est, t, tau_cmd)
     if engaged:
         controller_actuated(ctrl, t, tau, tau_cmd)
+
+
+@njit(cache=True, **WITHOUT_NRT)  # no reference counting, no allocation: as rovlab.sim.loop.run_loop
+def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, out):
+    """One control step at time t [s] with the samples y (NaN where ``present`` is False): the
+    loop's step between sampling the sensors and advancing the plant (:func:`estimate`, then
+    :func:`command`).
+
+    Fills the arrays of ``out`` (:class:`StepOut`): the estimator's per-channel report, the
+    corrected estimate and covariance at t, the estimate in the TRUTH layout the controller
+    reads, the demanded wrench, the wrench the allocation achieved, what the PWM commands give on
+    the model vehicle, the PWM commands and the controller's state. With ``engaged`` False the
+    controller is not run and the demanded wrench is zero (neutral thrusters); the estimator
+    still corrects and predicts with the zero wrench.
+    """
+    estimate(t, est, nav_of, y, present, out.rep, out.nav, out.x, out.P)
+    command(t, est, ctrl, act, ref, engaged, out.nav, out.tau, out.tau_cmd, out.tau_real, out.pwm, out.ctrl)
 
 
 control_step_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(control_step, "py_func", control_step))
@@ -106,17 +128,22 @@ def plant_push(plant, act, drive, row, pwm, tau_real):
     plant_advance(plant, drive, row, tau_real, tau_real)
 
 
-@njit(cache=True, **WITHOUT_NRT)
+DIVERGED = 1e9  # a true state beyond this (or not finite) means the plant has diverged
+
+
+@njit(cache=True, inline="always", **WITHOUT_NRT)
 def plant_sample(k, plant, sensors, drive, row, truth, y, present):
     """The plant's truth at t_k into ``truth`` (N_TRUTH) and the sensor samples of step k into y /
-    present (noise and drop-outs of ``row`` of ``drive``). Returns False when the truth is no
-    longer finite (the plant diverged)."""
+    present (noise and drop-outs of ``row`` of ``drive``). Returns False, sampling nothing, when
+    the truth is no longer finite or beyond :data:`DIVERGED` (the plant diverged); the loop's
+    step 1-2 and the real-time simulated vehicle's."""
     plant_truth(plant, truth)
+    finite = True
     for i in range(truth.shape[0]):
-        if not abs(truth[i]) < 1e9:
-            return False
-    sample_sensors(sensors, truth, k, drive.sensor_normals, drive.dropout, row, y, present)
-    return True
+        finite = finite and abs(truth[i]) < DIVERGED
+    if finite:
+        sample_sensors(sensors, truth, k, drive.sensor_normals, drive.dropout, row, y, present)
+    return finite
 
 
 plant_push_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(plant_push, "py_func", plant_push))

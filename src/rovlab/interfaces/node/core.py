@@ -453,7 +453,7 @@ class NodeCore:
             with explain_allocation((est, ctl)):
                 kernel(0.0, ew, cw, act, nav_of, np.full(m, np.nan), np.zeros(m, dtype=np.bool_), np.zeros(4), True,
                        StepOut(np.empty((m, N_REP)), np.zeros(N_TRUTH), np.zeros(4), np.zeros(4), np.zeros(4),
-                               np.empty(len(alloc.bank.names)), np.empty(n), np.empty((n, n))))
+                               np.empty(len(alloc.bank.names)), np.empty(n), np.empty((n, n)), np.empty(cw.state.shape[0])))
             _COMPILED.add(key)
             self._log(f"rovlab node: control step ready ({time.perf_counter() - started:.1f} s)")
         self.design = design
@@ -484,7 +484,8 @@ class NodeCore:
         self._x = est.x.copy()
         self._P = est.P.copy()
         # the same arrays, as the compiled step fills them
-        self._out = StepOut(self._rep, self._nav, self._tau, self._tau_cmd, self._tau_real, self._pwm, self._x, self._P)
+        self._out = StepOut(self._rep, self._nav, self._tau, self._tau_cmd, self._tau_real, self._pwm, self._x, self._P,
+                            np.empty(ctl.state.shape[0]))
 
 
 __all__ = ["TRUTH", "SAMPLE_RESULTS", "ChannelInfo", "NodeCore", "NodeOutput"]
