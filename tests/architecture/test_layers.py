@@ -93,3 +93,51 @@ def test_pymavlink_is_imported_lazily():
             if top_level or rel.parts[:2] != ("interfaces", "mavlink"):
                 bad.append(f"{rel}:{line} imports {module}")
     assert not bad, "\n".join(bad)
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """rovlab module -> the rovlab modules it imports, function-local imports included (an import
+    circle hidden in a function is still a circle); ``from package import submodule`` counts as
+    an import of the submodule only."""
+    modules = {}
+    for path in ROOT.rglob("*.py"):
+        parts = ["rovlab", *path.relative_to(ROOT).with_suffix("").parts]
+        modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for name, path in modules.items():
+        package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or "" if node.level == 0 else \
+                    ".".join(package[:len(package) - (node.level - 1)] + ([node.module] if node.module else []))
+                subs = [f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in modules]
+                targets = subs if len(subs) == len(node.names) else [base, *subs]
+            else:
+                continue
+            graph[name].update(t for t in targets if t in modules and t not in (name, "rovlab"))
+    return graph
+
+
+def test_no_import_circles():
+    """Modules import each other one way only (STYLE.md; issue 26): no circle, not even through
+    an import inside a function."""
+    graph = _module_graph()
+    seen: dict[str, int] = {}  # 1 on the current path, 2 done
+    circles: list[list[str]] = []
+
+    def visit(m: str, path: list[str]) -> None:
+        seen[m] = 1
+        for n in sorted(graph[m]):
+            if seen.get(n) == 1:
+                circles.append(path[path.index(n):] + [n])
+            elif n not in seen:
+                visit(n, [*path, n])
+        seen[m] = 2
+
+    for m in sorted(graph):
+        if m not in seen:
+            visit(m, [m])
+    assert not circles, "import circles:\n" + "\n".join(" -> ".join(c) for c in circles)

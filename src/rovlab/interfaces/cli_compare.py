@@ -47,7 +47,7 @@ def run_comparison(scenario: str, controllers: list[str], runs: int, seed: int |
     data, file = load_scenario_data(scenario)
     name = str(data.get("name") or Path(file).stem)
     if not quiet:
-        from rovlab.interfaces.cli_sim import announce_compile, loop_of
+        from rovlab.interfaces.compiling import announce_compile, loop_of
 
         announce_compile([loop_of(data, file, controller=c) for c in controllers])
     out = Path(out) if out is not None else Path("out") / f"compare-{name}"

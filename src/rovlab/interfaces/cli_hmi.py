@@ -42,7 +42,7 @@ def _cmd_hmi(args: argparse.Namespace) -> int:
     except ImportError:
         raise UserError("the HMI needs aiohttp: pip install 'rovlab[hmi]'") from None
     if args.source == "simulation":
-        from rovlab.interfaces.cli_sim import announce_compile, loop_of
+        from rovlab.interfaces.compiling import announce_compile, loop_of
         from rovlab.params.validate import ConfigError
         from rovlab.sim.scenario import load_scenario_data
 

@@ -135,51 +135,6 @@ def _simulate(args: argparse.Namespace, data, file, out: Path) -> int:
     return 130 if interrupted else 0  # Ctrl-C: the finished runs are written, the status says it stopped
 
 
-def loop_of(data, file, controller: str | None = None, design: str | None = None) -> tuple[str, str, float] | None:
-    """(marker key, description, duration in control steps) of the loop a scenario runs, read
-    without importing the simulator (so without compiling anything); None if the scenario or its
-    configuration is bad (the run itself then reports it, with file and key)."""
-    from rovlab import _jit
-    from rovlab.params.design import load_design_config
-    from rovlab.params.validate import ConfigError
-    from rovlab.sim.scenario import scenario_from_dict
-
-    try:
-        sc = scenario_from_dict(data, file=file)
-        config = load_design_config(design or sc.design)
-    except ConfigError:
-        return None
-    estimator, controller = sc.estimator or config.estimator, controller or sc.controller or config.controller
-    rows = math.floor(sc.duration_s / config.sample_time + 1e-9) + 1
-    return (_jit.loop_key(sc.plant, estimator, controller), f"the {estimator} + {controller} loop ({sc.plant} plant)",
-            rows)
-
-
-def announce_compile(loops: list[tuple[str, str, float] | None]) -> None:
-    """Say which loops compile now (those numba has not cached yet), before they do."""
-    from rovlab.sim.compile import needs_compiling
-
-    todo = list(dict.fromkeys(what for key, what, _ in filter(None, loops) if needs_compiling(key)))
-    if todo:
-        print(f"compiling {' and '.join(todo)} (once per machine: numba caches "
-              f"{'it' if len(todo) == 1 else 'them'}; about 30 s each on 2 cores) ...", file=sys.stderr, flush=True)
-
-
-def ensure_compiled(prep: Any) -> float | None:
-    """Compile the loop a prepared run needs if numba has not cached it yet, saying so and how
-    long it took; the seconds, or None if it was cached."""
-    from rovlab.sim.compile import compile_loop, needs_compiling
-
-    if not needs_compiling(prep.loop_key):
-        return None
-    sc = prep.scenario
-    what = f"the {sc.estimator or prep.config.estimator} + {sc.controller or prep.config.controller} loop ({sc.plant} plant)"
-    print(f"compiling {what} (once per machine: numba caches it for later runs) ...", file=sys.stderr, flush=True)
-    seconds = compile_loop(prep)
-    print(f"compiled {what} in {seconds:.1f} s", file=sys.stderr, flush=True)
-    return seconds
-
-
 def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
     result, metrics = _run(data, file, seed)
     notes: list[str] = []
@@ -190,6 +145,7 @@ def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
 def _run(data, file, seed):
     """One run of the scenario and its metrics."""
     from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.compiling import ensure_compiled
     from rovlab.sim.runner import PlantDiverged, prepare, run_prepared, summarise
 
     prep = prepare(data, file=file, seed=seed)
@@ -311,6 +267,7 @@ def _demo_comparisons(out: Path, runs: int) -> list[dict[str, Any]]:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    from rovlab.interfaces.compiling import announce_compile, loop_of
     from rovlab.io.report import write_report_html
     from rovlab.sim.scenario import load_scenario_data
 

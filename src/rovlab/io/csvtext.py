@@ -17,7 +17,7 @@ are further apart than one unit in the last place of a double). A value needing 
 or too small or too large for exact powers of ten (|x| < 1e-13 or > 1e31), is left to Python's
 ``repr`` (the shortest digits, by David Gay's algorithm) and laid out the same way:
 :func:`format_float`. Columns written to s significant digits are rounded in the same pass,
-exactly as :func:`rovlab.io.logs.round_significant` rounds (see :func:`_rounded`).
+exactly as :func:`round_significant` rounds (see :func:`_rounded`).
 """
 
 from __future__ import annotations
@@ -76,6 +76,24 @@ def format_float(v: float) -> str:
 # --------------------------------------------------------------------------------------------
 # the kernel
 # --------------------------------------------------------------------------------------------
+
+def round_significant(values: np.ndarray, digits: int) -> np.ndarray:
+    """``values`` rounded to ``digits`` significant digits (vectorised ``float('%.{digits}g' % x)``).
+
+    x * 10^k is rounded to an integer m and divided by the exact power of ten, which gives the
+    double nearest to m 10^-k: its shortest round-trip form has at most ``digits`` digits. Values
+    beyond 1e+-22 from the scale that powers of ten stay exact, inf and NaN are returned as they are.
+    """
+    a = np.asarray(values, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        k = (digits - 1) - np.floor(np.log10(np.abs(a)))
+        ok = np.isfinite(k) & (np.abs(k) <= 22)
+        k = np.where(ok, k, 0.0)
+        scale = 10.0 ** np.abs(k)
+        up = k >= 0
+        r = np.where(up, np.round(a * scale) / scale, np.round(a / scale) * scale)
+    return np.where(ok, r, a)
+
 
 @njit(cache=True, nogil=True, inline="always")
 def _fill(m, nd, pairs, dig):
@@ -138,7 +156,7 @@ def _digits(a, p10, pairs, dig):
 @njit(cache=True, nogil=True, inline="always")
 def _rounded(a, bits, s, p10, tens, pairs, dig):
     """Digits of a finite a > 0 (``bits``: its IEEE bits) rounded to s significant digits as
-    rovlab.io.logs.round_significant rounds (m = rint(a 10^k), k = s - 1 - floor(log10 a)), whose
+    round_significant rounds (m = rint(a 10^k), k = s - 1 - floor(log10 a)), whose
     shortest form they are (the double nearest m 10^-k; two decimals of at most 11 digits are
     further apart than a unit in the last place): (count, exponent); (0, 0) when |k| > 23, where
     round_significant leaves the value as it is; (-1, 0) when |k| is 22 or 23: left to Python.
@@ -280,7 +298,7 @@ def csv_rows(columns: Sequence[np.ndarray | tuple[np.ndarray, Sequence[str]]],
              significant: Sequence[int | None] | None = None) -> bytes | memoryview:
     """Equally long columns as CSV rows (no header, no quoting), UTF-8: each column a float array
     or (integer codes, labels), the label of each code. ``significant[c]``: write float column c
-    rounded to that many significant digits, as ``rovlab.io.logs.round_significant`` rounds
+    rounded to that many significant digits, as ``round_significant`` rounds
     (None: exactly)."""
     if not columns:
         raise ValueError("no columns to write")
@@ -341,8 +359,6 @@ def csv_rows(columns: Sequence[np.ndarray | tuple[np.ndarray, Sequence[str]]],
         size, n_left = _rows(F, F.view(np.uint64), sig, codes2, kinds, index, lab, lab_off, out, left)
     if not n_left:
         return out.data[:size]  # no copy: pages past size were never touched
-    from rovlab.io.logs import round_significant
-
     float_digits = [d for d, kind in zip(significant, kinds) if kind == 0]
     parts = out[:size].tobytes().split(bytes([_MARK]))
     pieces = [parts[0]]

@@ -28,6 +28,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from rovlab.io.csvtext import round_significant  # noqa: F401 (part of this module's API)
 from rovlab.io.tables import NUMBER_EXPECTED, RANGE_EXPECTED, number_problem, parse_number, scan_csv  # noqa: F401
 from rovlab.params.validate import ConfigError, Problem
 
@@ -555,22 +556,6 @@ def _raise(problems: list[Problem]) -> None:
     raise ConfigError(problems, "log")
 
 
-def round_significant(values: np.ndarray, digits: int) -> np.ndarray:
-    """``values`` rounded to ``digits`` significant digits (vectorised ``float('%.{digits}g' % x)``).
-
-    x * 10^k is rounded to an integer m and divided by the exact power of ten, which gives the
-    double nearest to m 10^-k: its shortest round-trip form has at most ``digits`` digits. Values
-    beyond 1e+-22 from the scale that powers of ten stay exact, inf and NaN are returned as they are.
-    """
-    a = np.asarray(values, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        k = (digits - 1) - np.floor(np.log10(np.abs(a)))
-        ok = np.isfinite(k) & (np.abs(k) <= 22)
-        k = np.where(ok, k, 0.0)
-        scale = 10.0 ** np.abs(k)
-        up = k >= 0
-        r = np.where(up, np.round(a * scale) / scale, np.round(a / scale) * scale)
-    return np.where(ok, r, a)
 
 
 class ChunkWriter:
