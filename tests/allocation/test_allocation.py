@@ -1,4 +1,4 @@
-"""Thrust allocation (SPEC section 3): configuration matrix, exact, weighted and saturation-aware."""
+"""Thrust allocation (Sandøy 2016, sec. 2.2; Fossen 2011): configuration matrix, exact, weighted and saturation-aware."""
 
 from __future__ import annotations
 
@@ -8,8 +8,9 @@ from scipy.optimize import linprog
 
 from rovlab.allocation import SCALE_ALL, Allocator, configuration_matrix, weighted_pinv
 
-# SPEC section 3 (agrees with thesis appendix B.3 once the eq. 2.2 example's sign slips are fixed)
-SPEC_B = np.array([
+# B from the cross products of Sandøy 2016, eq. 2.2-2.3 with table 2.1; agrees with its appendix B.3 (the worked
+# example after eq. 2.2 has sign slips, an erratum)
+B_UDRONE = np.array([
     [0, 0, 0, 1, 1, 0],
     [0, 0, 0, 0, 0, 1],
     [-1, -1, -1, 0, 0, 0],
@@ -19,14 +20,14 @@ SPEC_B = np.array([
 ])
 
 
-def test_udrone_configuration_matrix_equals_spec(udrone):
+def test_udrone_configuration_matrix_equals_the_thesis_geometry(udrone):
     B = configuration_matrix(udrone)
-    np.testing.assert_allclose(B, SPEC_B, atol=1e-15)
+    np.testing.assert_allclose(B, B_UDRONE, atol=1e-15)
     assert np.linalg.det(B) == pytest.approx(0.0173, abs=5e-5)
 
 
-def test_heave_example_from_spec(udrone):
-    # SPEC section 3: Z = +10 N (down) with K = M = 0 -> f = [-2.83, -2.83, -4.35, 0, 0, 0] N
+def test_heave_example_worked_out_from_B(udrone):
+    # Z = +10 N (down) with K = M = 0 -> f = [-2.83, -2.83, -4.35, 0, 0, 0] N (worked out here from B above)
     res = Allocator(udrone).allocate([0, 0, 10, 0])
     np.testing.assert_allclose(res.forces, [-2.83, -2.83, -4.35, 0, 0, 0], atol=5e-3)
     np.testing.assert_allclose(res.achieved, [0, 0, 10, 0, 0, 0], atol=1e-12)
@@ -53,7 +54,7 @@ def test_feasible_demand_is_met_exactly(vehicle_name, request, rng):
 def test_square_unconstrained_is_the_inverse(udrone, rng):
     alloc = Allocator(udrone, saturation=False)
     tau = rng.normal(size=6)
-    np.testing.assert_allclose(alloc.forces(tau)[0], np.linalg.solve(SPEC_B, tau), atol=1e-12)
+    np.testing.assert_allclose(alloc.forces(tau)[0], np.linalg.solve(B_UDRONE, tau), atol=1e-12)
 
 
 def test_unconstrained_is_the_plain_pseudo_inverse_and_says_so(heavy):

@@ -21,9 +21,9 @@ from rovlab.params.design import load_design_config
 from rovlab.params.vehicle import load_vehicle
 from rovlab.sim.autopilot import ThrusterMapping
 
-# SPEC section 6 (thesis appendix A.4 run in MATLAB): K and P of the thesis design
-K_SPEC = np.array([[17.7318, 0.0, 54.0771, 0.0], [0.0, 0.148116, 0.0, 2.41781]])
-P_SPEC = np.diag([17.7318, 0.148116])
+# K and P of the thesis design: Sandøy 2016, appendix A.4 run in MATLAB (the thesis does not print them)
+K_THESIS = np.array([[17.7318, 0.0, 54.0771, 0.0], [0.0, 0.148116, 0.0, 2.41781]])
+P_THESIS = np.diag([17.7318, 0.148116])
 
 
 @pytest.fixture(scope="module")
@@ -32,8 +32,8 @@ def thesis_design():
 
 
 def test_thesis_K_and_P_reproduced(thesis_design):
-    np.testing.assert_allclose(thesis_design.K, K_SPEC, rtol=5e-6, atol=1e-12)
-    np.testing.assert_allclose(thesis_design.P, P_SPEC, rtol=5e-6, atol=1e-12)
+    np.testing.assert_allclose(thesis_design.K, K_THESIS, rtol=5e-6, atol=1e-12)
+    np.testing.assert_allclose(thesis_design.P, P_THESIS, rtol=5e-6, atol=1e-12)
     assert thesis_design.reference == "continuous"
     assert np.all(np.abs(thesis_design.poles) < 1.0)
 
@@ -80,8 +80,8 @@ def test_design_lqr_rejects_bad_input():
 
 def test_lqg_law_cancels_the_bias_and_wraps_the_heading(thesis_design):
     ctl = LQGController.from_design(thesis_design)
-    # at the reference and at rest, the law only cancels the estimated bias (SPEC section 11:
-    # tau = P r - K x - b_hat, the thesis's eq. 5.29 had + b_hat)
+    # at the reference and at rest, the law only cancels the estimated bias (tau = P r - K x - b_hat;
+    # the thesis's eq. 5.29 has + b_hat, an erratum: the bias enters its model like a force, eq. 5.10)
     x = np.array([0.7, 0.3, 0.0, 0.0, -6.7, 0.02])
     np.testing.assert_allclose(ctl.tau(x, [0.7, 0.3]), [6.7, -0.02], atol=1e-12)
     # heading 179 deg, reference -179 deg: turn +2 deg, not -358 deg
@@ -102,7 +102,8 @@ def test_thruster_mapping_allocates_heave_and_yaw():
     mapping = ThrusterMapping(load_vehicle("udrone"))
     np.testing.assert_array_equal(tau_to_wrench([10.0, 0.5]), [0.0, 0.0, 10.0, 0.5])
     res = mapping.allocate([10.0, 0.0])
-    # SPEC section 3: Z = +10 N (down) gives f = [-2.83, -2.83, -4.35, 0, 0, 0] N, K = M = 0
+    # Z = +10 N (down) gives f = [-2.83, -2.83, -4.35, 0, 0, 0] N, K = M = 0 (worked out here from B f = tau,
+    # Sandøy 2016, eq. 2.3 and table 2.1)
     np.testing.assert_allclose(res.forces, [-2.83, -2.83, -4.35, 0, 0, 0], atol=5e-3)
     np.testing.assert_allclose(res.achieved, [0, 0, 10, 0, 0, 0], atol=1e-9)
     pwm = mapping.pwm_us([0.0, 0.5])

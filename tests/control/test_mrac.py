@@ -1,4 +1,5 @@
-"""Model-reference adaptive heave control (rovlab.control.mrac; SPEC section 6, issue 12).
+"""Model-reference adaptive heave control (rovlab.control.mrac; the tentative task 7 of Sandøy 2016's thesis
+description, not done there; issue 12).
 
 The kernels are plain compiled functions, so most checks drive them directly: the reference model
 against its transfer function, the Lyapunov derivative of the continuous law (Slotine & Li 1991,
@@ -21,8 +22,9 @@ from rovlab.models.discretise import zoh
 from rovlab.params.design import design_config_from_dict, load_design_config, packaged_config_path
 from rovlab.params.validate import ConfigError, read_toml
 
-# the continuous heave plant used below: M w_dot = Z - D_l w - D_q |w| w + F (uDrone, SPEC section 2,
-# with the thesis's design mass M = m - Z_wdot = 7.31 + 11.13 and uDrone's ~6.7 N of buoyancy)
+# the continuous heave plant used below: M w_dot = Z - D_l w - D_q |w| w + F (uDrone, Sandøy 2016, table 4.6,
+# with the thesis's design mass M = m - Z_wdot = 7.31 + 11.13 of appendix A.3 and uDrone's ~6.7 N of buoyancy,
+# B - W from table 4.1)
 THETA = np.array([18.44, 5.18, 36.99, -6.67])
 
 

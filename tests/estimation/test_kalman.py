@@ -42,7 +42,7 @@ def plain(model, **changes):
 
 
 def simulate(model, n, seed, *, u_amp=(5.0, 0.002)):
-    """Truth and raw sensor samples from the observer model itself (SPEC section 7, case 1 plant)."""
+    """Truth and raw sensor samples from the observer model itself (the plant of Sandøy 2016, fig. 5.2)."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) * model.h
     u = np.column_stack([u_amp[0] * np.sin(2 * np.pi * t / 20.0), u_amp[1] * np.cos(2 * np.pi * t / 15.0)])
@@ -123,7 +123,8 @@ def test_offline_run_equals_online_steps(filt, thesis_model):
 
 
 def test_timing_correct_then_report_then_project(filt, thesis_model):
-    # SPEC section 5: row k is corrected with y_k, reported, then projected with u_k.
+    # correct, then project (Sandøy 2016, table 5.1); decided here: row k is corrected with y_k, reported,
+    # then projected with u_k.
     b0 = filt.initial_belief()
     u = np.array([3.0, 0.01])
     b1, rep = filt.step(b0, 0.0, u, [np.nan, np.nan, np.nan])  # no sample: x_0 reported unchanged
@@ -187,7 +188,7 @@ def test_mapping_input_and_lever_arm(filt, thesis_model):
 
 def test_dropout_detected_by_timeout_and_recovered_with_transitional_variance(filt, thesis_model):
     t, u, y, X = simulate(thesis_model, 700, seed=7)
-    y[200:400, [0, 2]] = np.nan  # Qualisys z and psi lost from t = 20 s to 40 s (SPEC section 7, case 3)
+    y[200:400, [0, 2]] = np.nan  # Qualisys z and psi lost from t = 20 s to 40 s (Sandøy 2016, fig. 5.4)
     run = filt.run(t, u, y)
     timeout = thesis_model.channels[0].timeout_s  # 0.5 s
     first_lost = 200 + int(round(timeout / thesis_model.h))  # strictly later than the timeout
@@ -282,7 +283,7 @@ def test_a_persistent_deviation_without_a_witness_is_followed(filt, thesis_model
 
 def test_sensors_that_agree_with_each_other_overrule_a_wrong_prediction(filt, thesis_model):
     """Consensus rule: the thesis design starts from P0 = 0 and knows nothing of uDrone's 6.7 N net
-    buoyancy (SPEC section 2). Both depth sensors then disagree with the overconfident prediction
+    buoyancy (B - W from Sandøy 2016, table 4.1). Both depth sensors then disagree with the overconfident prediction
     but agree with each other: they must be used, not gated out into dead reckoning."""
     n = 100
     t = np.arange(n) * thesis_model.h

@@ -1,4 +1,4 @@
-"""Filter/controller configurations and the observer model built from them (SPEC section 5)."""
+"""Filter/controller configurations and the observer model built from them (Sandøy 2016, sec. 5.1)."""
 
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def test_packaged_configs_load_and_build_for_udrone():
 
 
 def test_thesis_config_values():
-    # SPEC section 5 / thesis appendix A.3
+    # Sandøy 2016, appendix A.3
     c = load_design_config("thesis")
     assert c.sample_time == 0.1
     assert c.model_values(load_vehicle("udrone")) == {
@@ -55,7 +55,7 @@ def test_default_config_takes_the_vehicle_values():
     model = build_filter_model(udrone, load_design_config("default"))
     assert model.params.M_w == pytest.approx(7.31 + 14.57) and model.params.N_r == -0.07
     assert model.R[1, 1] == udrone.sensor("pressure").variance["z"]
-    # lever arm of the pressure sensor (SPEC section 2: [0.12315, 0, -0.0465] m): z_VO = z_p - l_z
+    # lever arm of the pressure sensor (Sandøy 2016, table 4.7: [0.12315, 0, -0.0465] m): z_VO = z_p - l_z (eq. 5.23)
     assert model.channels[1].offset == -0.0465
     assert model.channels[0].timeout_s == pytest.approx(0.5)  # 5 periods at 10 Hz
 

@@ -1,8 +1,8 @@
 """Sensor faults on logs through ``rovlab filter`` (issue 10): outliers, a stuck sensor, an offset.
 
-The logs come from the thesis's observer model itself (SPEC section 5, case study 1 plant: the
-filter's model is right), sampled at 10 Hz with the thesis's sensor variances (SPEC section 2,
-thesis table 4.8), so every reaction below is the sensor management's, not a model mismatch.
+The logs come from the thesis's observer model itself (Sandøy 2016, sec. 5.1.1, the plant of its case
+study 1, fig. 5.2: the filter's model is right), sampled at 10 Hz with the thesis's sensor variances
+(table 4.8), so every reaction below is the sensor management's, not a model mismatch.
 """
 
 from __future__ import annotations

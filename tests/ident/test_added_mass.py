@@ -1,4 +1,4 @@
-"""Added mass from geometry (SPEC 9.4: Eidsvik's method on DNV-RP-H103 tables A-1 and A-2)."""
+"""Added mass from geometry (Sandøy 2016, sec. 4.2.1: Eidsvik's method on DNV-RP-H103 tables A-1 and A-2)."""
 
 from __future__ import annotations
 
@@ -18,21 +18,22 @@ from rovlab.ident.added_mass import (
     rect_CA,
 )
 
-# uDrone's CAD geometry, thesis table 4.2 with the plane mapping of SPEC 9.4 (SPEC section 2)
+# uDrone's CAD geometry, Sandøy 2016, table 4.2; its plane labels are an erratum (its formulas attach the areas
+# to the wrong planes): front = YZ, side = XZ, top = XY is the mapping that reproduces its table 4.4
 UDRONE = dict(length=0.482, width=0.333, height=0.287, area_front=0.055915, area_side=0.102378,
               area_top=0.117375, rho=1000.0)
 
 
 def test_reproduces_thesis_table_4_4():
-    # Sandøy 2016, table 4.4 (restated in SPEC 2 and 9.4): X_udot = -5.50, Y_vdot = -12.70,
-    # Z_wdot = -14.57, N_rdot = -0.12. SPEC 9.4: with these rounded inputs the method gives
-    # -5.50, -12.71, -14.57, -0.125 (the thesis used unrounded CAD values), hence +-0.01 on Y and N.
+    # Sandøy 2016, table 4.4: X_udot = -5.50, Y_vdot = -12.70, Z_wdot = -14.57, N_rdot = -0.12.
+    # With the rounded inputs of its table 4.2 the method gives -5.50, -12.71, -14.57, -0.125 (worked out
+    # here; the thesis presumably used unrounded CAD values), hence +-0.01 on Y and N.
     est = added_mass_dnv(**UDRONE)
     assert est.X_udot == pytest.approx(-5.50, abs=0.005)
     assert est.Y_vdot == pytest.approx(-12.70, abs=0.01)
     assert est.Z_wdot == pytest.approx(-14.57, abs=0.005)
     assert est.N_rdot == pytest.approx(-0.12, abs=0.01)
-    # and the SPEC 9.4 values to their printed precision
+    # and the values worked out here from table 4.2 (above), to their printed precision
     assert round(est.Y_vdot, 2) == -12.71
     assert round(est.N_rdot, 3) == -0.125
     assert est.extrapolated == ()

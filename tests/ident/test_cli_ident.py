@@ -39,7 +39,7 @@ def test_thrust_round_trip_and_update(capsys, tmp_path, vehicle_copy):
     data = run_json(capsys, "identify", "thrust", log, "--pair", 2, "--window", 3, "--no-plot",
                     "--update", vehicle_copy, "--thruster", "T4,T5")
     assert set(data) >= {"K_L_pos", "K_NL_pos", "K_L_neg", "K_NL_neg", "deadband_us", "rms_n"}
-    # SPEC 2, T4/T5: K_L+ 7.22e-2, K_NL+ 2.41e-4, K_L- 3.57e-2, K_NL- 1.75e-4
+    # Sandøy 2016, table 2.2, T4/T5: K_L+ 7.22e-2, K_NL+ 2.41e-4, K_L- 3.57e-2, K_NL- 1.75e-4
     for key, truth in (("K_L_pos", 7.22e-2), ("K_NL_pos", 2.41e-4), ("K_L_neg", 3.57e-2), ("K_NL_neg", 1.75e-4)):
         assert data[key] == pytest.approx(truth, rel=0.03), key
     v = load_vehicle(vehicle_copy)
@@ -68,7 +68,7 @@ def test_towing_round_trip_writes_plot_into_the_working_directory(capsys, tmp_pa
     data = run_json(capsys, "identify", "towing", runs, "--rig", rig, "--update", vehicle_copy)  # DOF from the log
     assert data["dof"] == "heave"
     assert set(data) >= {"linear", "quadratic", "cubic"}
-    for key, truth in (("linear", -5.18), ("quadratic", -36.99), ("cubic", -123.15)):  # SPEC 2, heave
+    for key, truth in (("linear", -5.18), ("quadratic", -36.99), ("cubic", -123.15)):  # Sandøy 2016, table 4.6
         assert abs(data[key] - truth) < 3.5 * data["stderr"][key]
     assert data["plot"] == "heave-towing.png" and (work / "heave-towing.png").exists()
     assert not (tmp_path / "heave-towing.png").exists()
@@ -81,7 +81,7 @@ def test_yaw_round_trip(capsys, tmp_path):
     runs = tmp_path / "yaw.csv"
     run_json(capsys, "lab", "yaw", "--seed", 6, "--duration-s", 15, "--out", runs)
     data = run_json(capsys, "identify", "yaw", runs, "--no-plot")
-    assert data["linear"] == pytest.approx(-0.07, rel=0.05)  # SPEC 2: N_r
+    assert data["linear"] == pytest.approx(-0.07, rel=0.05)  # Sandøy 2016, table 4.6: N_r
     assert data["quadratic"] == pytest.approx(-1.55, rel=0.05)  # N_|r|r
 
 
@@ -91,7 +91,7 @@ def test_step_round_trip_and_update(capsys, tmp_path, vehicle_copy):
     assert "--mass 7.31" in made["next"]
     data = run_json(capsys, "identify", "step", log, "--mass", 7.31, "--no-plot", "--update", vehicle_copy)
     assert set(data) >= {"gain", "pole", "added_mass", "linear_damping"}
-    assert data["added_mass"] == pytest.approx(-5.50, rel=0.05)  # SNAME sign, SPEC 2
+    assert data["added_mass"] == pytest.approx(-5.50, rel=0.05)  # SNAME sign; Sandøy 2016, table 4.4
     assert data["linear_damping"] == pytest.approx(-4.03, rel=0.05)
     assert data["gain"] == pytest.approx(1 / (7.31 + 5.50), rel=0.05)
     v = load_vehicle(vehicle_copy)
@@ -107,7 +107,7 @@ def test_step_with_the_vehicles_nonlinear_damping(capsys, tmp_path, vehicle_copy
                     "--update", vehicle_copy)
     assert data["mass"] == pytest.approx(7.31)
     assert data["fixed_damping"] == {"quadratic": pytest.approx(-21.66), "cubic": pytest.approx(-128.52)}
-    assert data["added_mass"] == pytest.approx(-12.70, rel=0.03)  # SPEC 2: Y_vdot
+    assert data["added_mass"] == pytest.approx(-12.70, rel=0.03)  # Sandøy 2016, table 4.4: Y_vdot
     assert load_vehicle(vehicle_copy).added_mass[1] == pytest.approx(data["added_mass"], rel=1e-3)
     code, out, _ = run(capsys, "identify", "step", log, "--dof", "sway", "--vehicle", "udrone", "--no-plot")
     assert code == 0 and "held fixed (from udrone)" in out
@@ -136,7 +136,7 @@ def test_noise_round_trip_and_update(capsys, tmp_path, vehicle_copy):
 def test_added_mass_contract(capsys, tmp_path):
     data = run_json(capsys, "added-mass", "--length", 0.482, "--width", 0.333, "--height", 0.287,
                     "--area-front", 0.055915, "--area-side", 0.102378, "--area-top", 0.117375)
-    # thesis table 4.4 / SPEC 9.4
+    # Sandøy 2016, table 4.4 (Eidsvik's method, sec. 4.2.1, on the geometry of table 4.2)
     assert data["X_udot"] == pytest.approx(-5.50, abs=0.01)
     assert data["Y_vdot"] == pytest.approx(-12.70, abs=0.01)
     assert data["Z_wdot"] == pytest.approx(-14.57, abs=0.01)
@@ -245,7 +245,7 @@ def test_step_update_can_keep_the_towing_damping(capsys, tmp_path, vehicle_copy)
                        "--added-mass-only")
     assert code == 0 and "equivalent linearisation" not in err
     v = load_vehicle(vehicle_copy)
-    assert v.damping_linear[0] == -4.03 and v.added_mass[0] != -5.50  # SPEC 2 X_u kept
+    assert v.damping_linear[0] == -4.03 and v.added_mass[0] != -5.50  # X_u of Sandøy 2016, table 4.6 kept
     code, _, err = run(capsys, "identify", "step", log, "--mass", 7.31, "--no-plot", "--update", vehicle_copy)
     assert code == 0 and "equivalent linearisation" in err
     assert load_vehicle(vehicle_copy).damping_linear[0] < -4.03
@@ -267,7 +267,7 @@ def test_step_dof_must_match_the_log_columns(capsys, tmp_path, vehicle_copy):
                        "--update", vehicle_copy)
     assert code == 2 and "use --dof yaw" in err and "Traceback" not in err
     assert vehicle_copy.read_text(encoding="utf-8") == before
-    # without --dof the DOF follows the columns: a yaw log updates N_rdot (SPEC 2: -0.12 kg m^2)
+    # without --dof the DOF follows the columns: a yaw log updates N_rdot (Sandøy 2016, table 4.4: -0.12 kg m^2)
     data = run_json(capsys, "identify", "step", yaw_log, "--mass", 0.16, "--no-plot", "--update", vehicle_copy,
                     "--added-mass-only")
     assert data["dof"] == "yaw"

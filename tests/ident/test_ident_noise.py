@@ -1,4 +1,5 @@
-"""Sensor noise (SPEC 9.6): resting logs -> variances (R) with drift removed; mapping to [[sensors]]."""
+"""Sensor noise (Sandøy 2016, sec. 4.4.1): resting logs -> variances (R) with drift removed (decided here; the thesis
+took MATLAB's var of the raw series); mapping to [[sensors]]."""
 
 from __future__ import annotations
 

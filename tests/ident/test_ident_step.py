@@ -1,4 +1,4 @@
-"""Step/relay response (SPEC 9.5): relay test -> output-error fit of k/(s + a) -> added mass, linear damping."""
+"""Step/relay response (Sandøy 2016, sec. 4.2.2): relay test -> output-error fit of k/(s + a) -> added mass, linear damping."""
 
 from __future__ import annotations
 
@@ -61,8 +61,8 @@ def test_nonlinear_truth_biases_the_linear_model(lab_table, udrone_vehicle):
     assert high.fit_percent < 99.5  # the model error is visible in the fit
 
 
-def test_thesis_numbers_convert_as_spec_11_says():
-    # SPEC 9.5/11: k = 0.07769 gives 1/k - m = 5.56 kg (the thesis printed 5.517)
+def test_thesis_numbers_convert_with_the_errata_corrected():
+    # Sandøy 2016, sec. 4.2.4: k = 0.07769 gives 1/k - m = 5.56 kg (the thesis printed 5.517 in eq. 4.14, an arithmetic slip)
     t = np.arange(0, 40, 0.1)
     k, a, m = 0.07769, 1.197, 7.31
     force = np.where((t // 5) % 2 == 0, 2.0, -2.0)
@@ -133,7 +133,7 @@ def test_undamped_dof_gives_zero_not_positive_damping(lab_table, heavy_vehicle):
 @pytest.mark.parametrize("dof, seed", [("surge", 21), ("sway", 22), ("heave", 23), ("yaw", 24)])
 def test_known_nonlinear_damping_held_fixed_removes_the_added_mass_bias(lab_table, udrone_vehicle, dof, seed):
     # Issue 10, item 5: on the virtual lab's default vehicle (uDrone with its full quadratic and
-    # cubic damping, SPEC 2) and default relay, the linear first-order model biases the added mass
+    # cubic damping, Sandøy 2016, table 4.6) and default relay, the linear first-order model biases the added mass
     # (8-17 %); with the vehicle's nonlinear damping held fixed it is recovered within 3 %.
     v = udrone_vehicle
     i = DOF4.index(dof)

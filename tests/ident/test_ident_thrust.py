@@ -1,5 +1,6 @@
-"""Thrust curves (SPEC 9.1): virtual load-cell rig -> identify -> coefficients within 3 % of the truth;
-the maker's 16 V table fitted with its RMS residual; clear errors for data that cannot support the fit."""
+"""Thrust curves (Sandøy 2016, sec. 2.3): virtual load-cell rig -> identify -> coefficients within 3 % of the truth;
+the maker's 16 V table (Blue Robotics T200 data) fitted with its RMS residual; clear errors for data that cannot
+support the fit."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Towing damping (SPEC 9.2): virtual carriage -> identify -> SNAME coefficients.
+"""Towing damping (Sandøy 2016, sec. 4.3.1): virtual carriage -> identify -> SNAME coefficients.
 
 Tolerances, as measured over many seeds with the lab's default noise (0.15 N load cell, 10 runs):
 the damping force D(v) is recovered within 5 % at every towed speed; the individual linear,
@@ -30,7 +30,7 @@ def test_noise_free_runs_recover_every_coefficient(lab_table, udrone_vehicle):
     veh, rig = lab.towing_runs(udrone_vehicle, "surge", seed=1, noise_std_n=0.0, speed_noise_mps=0.0,
                                offset_std_n=0.5)  # offsets stay: the tare must remove them
     fit = towing.identify_towing(lab_table(veh), lab_table(rig), dof="surge")
-    # SPEC section 2: X_u = -4.03, X_|u|u = -18.18, X_uuu = -24.24
+    # Sandøy 2016, table 4.6: X_u = -4.03, X_|u|u = -18.18, X_uuu = -24.24
     assert fit.linear == pytest.approx(-4.03, rel=0.01)
     assert fit.quadratic == pytest.approx(-18.18, rel=0.01)
     assert fit.cubic == pytest.approx(-24.24, rel=0.01)
@@ -75,7 +75,7 @@ def test_two_term_fit_for_a_vehicle_without_cubic_damping(lab_table, heavy_vehic
 
 
 def test_heave_buoyancy_offset_is_tared(lab_table, udrone_vehicle):
-    # uDrone is 6.7 N buoyant (SPEC 2): the rig holds that at rest; the tare removes it
+    # uDrone is 6.7 N buoyant (B - W from Sandøy 2016, table 4.1): the rig holds that at rest; the tare removes it
     veh, rig = lab.towing_runs(udrone_vehicle, "heave", seed=9, offset_std_n=0.0)
     fit = towing.identify_towing(lab_table(veh), lab_table(rig), dof="heave")
     net = udrone_vehicle.buoyancy - udrone_vehicle.weight

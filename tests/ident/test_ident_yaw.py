@@ -1,4 +1,4 @@
-"""Yaw damping (SPEC 9.3): constant-moment runs -> steady yaw rate from a wrapped, noisy heading -> N_r, N_|r|r."""
+"""Yaw damping (Sandøy 2016, sec. 4.3.2): constant-moment runs -> steady yaw rate from a wrapped, noisy heading -> N_r, N_|r|r."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ def test_round_trip_within_5_percent(request, lab_table, vehicle_name, seed):
     if vehicle_name == "modified_udrone":
         assert fit.cubic == pytest.approx(N_rrr, rel=0.05)
     assert len(fit.points) == 5
-    # SPEC 9.3 moments 0.25 ... 2 N m recovered per run
+    # the moments of Sandøy 2016, sec. 4.3.2 (0.25 ... 2 N m) recovered per run
     np.testing.assert_allclose([p.force for p in fit.points], lab.DEFAULT_MOMENTS, rtol=1e-9)
 
 

@@ -1,4 +1,4 @@
-"""The virtual lab: seeded, reproducible, and shaped like the thesis's experiments (SPEC 9)."""
+"""The virtual lab: seeded, reproducible, and shaped like the thesis's experiments (Sandøy 2016, sec. 2.3 and ch. 4)."""
 
 from __future__ import annotations
 
@@ -30,18 +30,18 @@ def test_file_records_seed_settings_and_truth(tmp_path, udrone_vehicle):
     assert meta["seed"] == "77"
     assert meta["vehicle"] == "udrone"
     assert meta["setting.dof"] == "sway"
-    assert float(meta["truth.linear"]) == -6.22  # SPEC 2: Y_v
+    assert float(meta["truth.linear"]) == -6.22  # Sandøy 2016, table 4.6: Y_v
     assert table.columns == ("run", "time_s", "speed_mps", "force_n")
 
 
-def test_staircase_follows_spec_9_1(udrone_vehicle):
+def test_staircase_follows_the_thesis_rig(udrone_vehicle):
     data = lab.thrust_rig(udrone_vehicle, "T2", seed=1)  # the full thesis staircase
     pwm, t = data.columns["pwm_us"], data.columns["time_s"]
     levels = np.unique(pwm)
     np.testing.assert_array_equal(levels, np.arange(1300, 1701, 10))  # 1300 -> 1700 us in 10 us steps
     assert t[-1] + t[1] == pytest.approx(41 * 30.0)  # 30 s each
     assert np.all(np.diff(pwm) >= 0)
-    # the ESC sees a low-pass-filtered command: no force spike at a step (SPEC 9.1). Noise-free
+    # the ESC sees a low-pass-filtered command: no force spike at a step (Sandøy 2016, sec. 2.3.2). Noise-free
     # rig, step 1650 -> 1660 us: one sample after the step the force has moved < 5 % of the way.
     quiet = lab.thrust_rig(udrone_vehicle, "T2", seed=1, noise_std_n=0.0)
     f = quiet.columns["force_n"]
@@ -60,7 +60,7 @@ def test_towing_runs_ramp_hold_and_rig_drag(udrone_vehicle):
     hold = v == 0.3
     f_total = veh.columns["force_n"][run1][hold][-1]
     f_rig = rig.columns["force_n"][rig.columns["run"] == 1][hold][-1]
-    # force_n = -(X_u u + X_|u|u u|u| + X_uuu u^3) + rig drag (SPEC 2 surge values)
+    # force_n = -(X_u u + X_|u|u u|u| + X_uuu u^3) + rig drag (surge values of Sandøy 2016, table 4.6)
     expected = 4.03 * 0.3 + 18.18 * 0.09 + 24.24 * 0.027
     assert f_total - f_rig == pytest.approx(expected, rel=1e-3)
     assert f_rig == pytest.approx(1.0 * 0.3 + 6.0 * 0.09, rel=1e-3)
@@ -117,7 +117,7 @@ def test_settings_are_checked_by_the_python_api_too(udrone_vehicle):
 
 def test_thrusters_with_different_curves_on_one_rig_are_flagged(udrone_vehicle):
     same = lab.thrust_rig(udrone_vehicle, ["T1", "T2"], seed=1, step_s=2.0)
-    mixed = lab.thrust_rig(udrone_vehicle, ["T1", "T3"], seed=1, step_s=2.0)  # SPEC 2: T3 has its own curve
+    mixed = lab.thrust_rig(udrone_vehicle, ["T1", "T3"], seed=1, step_s=2.0)  # Sandøy 2016, table 2.2: T3 has its own curve
     assert not any("do not share one thrust curve" in n for n in same.notes)
     assert any("do not share one thrust curve" in n for n in mixed.notes)
 

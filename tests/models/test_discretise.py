@@ -51,7 +51,7 @@ def _thesis_model():
     return build_filter_model(load_vehicle("udrone"), load_design_config("thesis"))
 
 
-# Thesis eq. 5.31 (Sandøy 2016, sec. 5.3; restated in SPEC section 5), printed to 2 digits.
+# Thesis eq. 5.31 (Sandøy 2016, sec. 5.3.1), printed to 2 digits.
 Q_THESIS = [
     ["9.9e-09", "0", "1.5e-07", "0", "1.8e-06", "0"],
     ["0", "7.3e-09", "0", "1.8e-07", "0", "6.3e-07"],

@@ -33,7 +33,7 @@ def test_buoyancy_and_added_mass_scale_with_the_submerged_fraction(udrone):
 
 
 def test_a_buoyant_vehicle_floats_at_the_surface(udrone):
-    """uDrone is 6.7 N positively buoyant (SPEC section 2): left alone at 1 m it rises and settles
+    """uDrone is 6.7 N positively buoyant (B - W from Sandøy 2016, table 4.1): left alone at 1 m it rises and settles
     where buoyancy equals weight, s = W / B = 0.915 of the hull under water."""
     p = k.pack(udrone)
     x = np.array([0, 0, 1.0, 0, 0, 0, 0, 0.0])

@@ -1,4 +1,4 @@
-"""The 4-DOF process model (SPEC section 4; Fossen 2011 ch. 6-7): properties and kernels."""
+"""The 4-DOF process model (Sandøy 2016, sec. 3.3 and appendix B.2; Fossen 2011 ch. 6-7): properties and kernels."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def test_mass_matrix_symmetric_positive_definite(udrone, heavy):
         M = k.mass_matrix(v)
         np.testing.assert_array_equal(M, M.T)
         assert np.all(np.linalg.eigvalsh(M) > 0)
-    # SPEC section 5: M_w = m - Z_wdot, M_r = I_zz - N_rdot
+    # Sandøy 2016, eq. B.1-B.3 (M = M_RB + M_A): M_w = m - Z_wdot, M_r = I_zz - N_rdot
     M = k.mass_matrix(udrone)
     assert M[2, 2] == pytest.approx(7.31 + 14.57) and M[3, 3] == pytest.approx(0.16 + 0.12)
 
@@ -51,7 +51,7 @@ def test_kernel_equals_matrix_form(udrone, rng):
 
 
 def test_restoring_makes_positively_buoyant_vehicle_rise(udrone):
-    # B - W = 6.7 N (SPEC section 2): at rest with no thrust the vehicle accelerates up (z decreases)
+    # B - W = 6.7 N (Sandøy 2016, table 4.1): at rest with no thrust the vehicle accelerates up (z decreases)
     acc = k.nu_dot(udrone, np.array([0.0, 0.0, 1.0, 0.0]), np.zeros(4), np.zeros(4))  # 1 m down
     assert acc[2] == pytest.approx(-(udrone.buoyancy - udrone.weight) / (7.31 + 14.57))
     assert acc[2] < 0
@@ -111,7 +111,7 @@ def test_rk4_converges_at_fourth_order(udrone):
 def test_linearisation_at_rest_is_the_depth_heading_model(udrone):
     A, B = k.linearise(udrone, np.array([0.0, 0.0, 1.0, 0.0]), np.zeros(4), np.zeros(4))  # 1 m deep
     Ac, Bc, _ = control_model(HeaveYawParams.from_vehicle(udrone))
-    # states [x y z psi u v w r]: heave/yaw sub-block equals the control model (SPEC section 6)
+    # states [x y z psi u v w r]: heave/yaw sub-block equals the control model (Sandøy 2016, eq. 5.27)
     idx = [2, 3, 6, 7]
     np.testing.assert_allclose(A[np.ix_(idx, idx)], Ac, atol=1e-15)
     np.testing.assert_allclose(B[np.ix_(idx, [2, 3])], Bc, atol=1e-15)

@@ -1,4 +1,5 @@
-"""Gauss-Markov discretisation and correlated sampling (SPEC section 4); linear models (SPEC 5-6)."""
+"""Gauss-Markov discretisation and correlated sampling (Sandøy 2016, sec. 3.2.2 and 3.2.4); linear models (sec. 5.1.1
+and 5.2.1)."""
 
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ def test_gauss_markov_statistics_do_not_depend_on_step(rng):
         for _ in range(50):
             b = gauss_markov_step(b, phi, std, rng)
         assert np.var(b) == pytest.approx(sigma2, rel=0.08)
-        # lag-h autocorrelation exp(-beta h) (Brown & Hwang 2012, eq. 2.8.x)
+        # lag-h autocorrelation exp(-beta h) of a first-order Gauss-Markov process (Brown & Hwang 2012, ch. 2)
         b2 = gauss_markov_step(b, phi, std, rng)
         assert np.corrcoef(b, b2)[0, 1] == pytest.approx(np.exp(-beta * h), abs=0.04)
 
@@ -46,7 +47,7 @@ def test_psd_factor_handles_semidefinite(rng):
 
 
 def test_observer_model_structure():
-    # thesis design values (SPEC section 5)
+    # thesis design values (Sandøy 2016, appendix A.3)
     p = HeaveYawParams.from_values(m=7.31, I_zz=0.16, Z_wdot=-11.13, N_rdot=-0.1, Z_w=-5.18, N_r=-0.06656)
     assert p.M_w == pytest.approx(18.44) and p.M_r == pytest.approx(0.26)
     A, B, E = observer_model(p, 100 * p.M_w, 100 * p.M_r)

@@ -1,4 +1,5 @@
-"""Thruster curves (SPEC section 3): dead band, exact inverse, saturation, T200 tables."""
+"""Thruster curves (Sandøy 2016, eq. 2.5 and table 2.2): dead band, exact inverse, saturation, T200 tables
+(Blue Robotics T200 data)."""
 
 from __future__ import annotations
 
@@ -23,8 +24,8 @@ def test_dead_band_gives_no_thrust(udrone):
     assert force_from_pwm(t, 1526) > 0 and force_from_pwm(t, 1474) < 0
 
 
-def test_curve_values_from_spec_formula(udrone):
-    # SPEC section 3, T1: f = K_L+ (u-d) + K_NL+ (u-d)^2 for u > d
+def test_curve_values_from_the_thesis_formula(udrone):
+    # Sandøy 2016, eq. 2.5 and table 2.2, T1: f = K_L+ (u-d) + K_NL+ (u-d)^2 for u > d
     t = udrone.thruster("T1")
     s = 1650 - 1500 - 25
     assert force_from_pwm(t, 1650) == pytest.approx(6.07e-2 * s + 3.33e-4 * s**2, rel=1e-15)
@@ -34,7 +35,8 @@ def test_curve_values_from_spec_formula(udrone):
 
 
 def test_round_trip_force_pwm_force_over_whole_range(udrone):
-    """SPEC section 3 inverse: force -> PWM -> force within 1e-9 N everywhere in the range."""
+    """Exact inverse of eq. 2.5 (the thesis's eq. 2.6 is garbled, an erratum): force -> PWM -> force within 1e-9 N
+    everywhere in the range."""
     for t in udrone.thrusters:
         lo, hi = thrust_limits(t)
         for f in np.linspace(lo, hi, 2001):

@@ -24,8 +24,8 @@ def test_packaged_vehicles_are_listed_and_load():
         assert all(v.sources[block] for block in ("rigid_body", "restoring", "added_mass", "damping"))
 
 
-def test_udrone_values_match_spec_section_2(udrone):
-    # SPEC section 2 (from Sandøy 2016, tables 4.1-4.8)
+def test_udrone_values_match_the_thesis_tables(udrone):
+    # Sandøy 2016, tables 2.1-2.2 and 4.1-4.8 (W = m g and B = rho g Delta from table 4.1)
     assert udrone.mass == 7.31 and udrone.I_zz == 0.16
     assert udrone.weight == pytest.approx(71.7, abs=0.05)
     assert udrone.buoyancy == pytest.approx(78.4, abs=0.05)

@@ -1,4 +1,4 @@
-"""The closed-loop simulator and the thesis case studies (SPEC section 7; Sandøy 2016, figs. 5.2-5.4).
+"""The closed-loop simulator and the thesis case studies (Sandøy 2016, sec. 5.3.1, figs. 5.2-5.4).
 
 The case-study tests check numerically what the thesis observed: the references are reached, the
 estimates stay within a few of the filter's own standard deviations, the bias absorbs what the
@@ -66,7 +66,7 @@ def test_process_model_bias_absorbs_what_the_model_leaves_out(runs):
     t = c["time_s"]
     assert abs(c["true_z"][-1] - 0.70) < 0.02
     late = t > 40
-    # the heave bias settles on the net buoyancy plus the Gauss-Markov disturbance (SPEC section 4)
+    # the heave bias settles on the net buoyancy plus the Gauss-Markov disturbance (Sandøy 2016, eq. 3.11 and 3.18)
     assert np.mean(np.abs(c["est_b_w"][late] - c["true_b_w"][late])) < 1.0
     assert c["est_b_w"][late].mean() < -5.0
     w_err = np.abs(_err(c, "w"))

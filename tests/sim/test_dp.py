@@ -69,7 +69,7 @@ def test_reference_model_is_smooth_speed_limited_and_arrives():
 
 
 def test_bias_is_fed_forward_with_the_right_sign(udrone, cfg):
-    """tau = ... - b_hat (the bias enters the model like a force; SPEC sec. 11, eq. 5.29 erratum)."""
+    """tau = ... - b_hat (the bias enters the model like a force; the thesis's eq. 5.29 adds + b_hat, an erratum)."""
     nav = np.zeros(12)
     nav[2] = 1.0
     ref = np.array([0.0, 0.0, 1.0, 0.0])

@@ -17,7 +17,7 @@ DROPOUT_TEXT = resolve_scenario_path("dropout").read_text(encoding="utf-8")
 def test_packaged_scenarios_reproduce_the_thesis_case_studies():
     assert {"step-observer-model", "step-process-model", "dropout"} <= set(packaged_scenario_names())
     sc = load_scenario("dropout")
-    # SPEC section 7: start at z = 1.05 m, psi = 52 deg; z_ref = 0.70 m, psi_ref = 30 deg, then 0 deg at 22 s
+    # Sandøy 2016, sec. 5.3.1: start at z = 1.05 m, psi = 52 deg; z_ref = 0.70 m, psi_ref = 30 deg, then 0 deg at 22 s
     assert sc.initial[2] == 1.05 and sc.initial[3] == pytest.approx(math.radians(52))
     np.testing.assert_allclose(sc.reference_times, [0.0, 22.0])
     np.testing.assert_allclose(sc.reference_z, [0.70, 0.70])

@@ -1,5 +1,5 @@
 """Drop-out, recovery and sensor-loss metrics (issue 10): the pure functions on synthetic columns,
-then the closed-loop checks that run fast (a few runs of the packaged case studies, SPEC 7)."""
+then the closed-loop checks that run fast (a few runs of the packaged case studies, Sandøy 2016, sec. 5.3.1)."""
 
 from __future__ import annotations
 
@@ -111,7 +111,7 @@ def test_dropout_metrics_composes_the_three():
 
 
 # --------------------------------------------------------------------------------------------
-# closed loop (SPEC 7, case studies 2 and 3; thesis configuration)
+# closed loop (Sandøy 2016, sec. 5.3.1, case studies 2 and 3, figs. 5.3 and 5.4; thesis configuration)
 # --------------------------------------------------------------------------------------------
 
 def thesis_with(**fusion):
