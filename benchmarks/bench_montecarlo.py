@@ -136,7 +136,8 @@ def main() -> None:
           f"design, the run, its CSV/MCAP files)")
     print(f"   the compiled loop alone, in process, one core, one run at a time, best of 7: "
           f"{rate_loop / 1e6:.2f} M steps/s ({per_run / rate_loop * 1e3:.2f} ms per 60 s run)")
-    print(f"   goal >= 5 M steps/s whole process = {RUNS} runs in <= {steps / 5e6:.2f} s")
+    print(f"   floor (issue 25): >= 3.5 M steps/s whole process on 2 workers = {RUNS} runs in <= {steps / 3.5e6:.2f} s; "
+          "a single 60 s case <= 1.0 s (issue 16's goal was 5 M steps/s)")
 
 
 if __name__ == "__main__":

@@ -135,14 +135,14 @@ def _simulate(args: argparse.Namespace, data, file, out: Path) -> int:
     return 130 if interrupted else 0  # Ctrl-C: the finished runs are written, the status says it stopped
 
 
-def _run_and_write(data, file, seed, out: Path, *, figures: bool = True):
-    result, metrics = _run(data, file, seed)
+def _run_and_write(data, file, seed, out: Path, *, figures: bool = True, compiled: list[float] | None = None):
+    result, metrics = _run(data, file, seed, compiled)
     notes: list[str] = []
     _write(out, result, metrics, notes, figures=figures)
     return result, metrics, notes
 
 
-def _run(data, file, seed):
+def _run(data, file, seed, compiled: list[float] | None = None):
     """One run of the scenario and its metrics."""
     from rovlab.interfaces.cli import UserError
     from rovlab.interfaces.compiling import ensure_compiled
@@ -150,7 +150,9 @@ def _run(data, file, seed):
 
     prep = prepare(data, file=file, seed=seed)
     try:
-        ensure_compiled(prep)
+        seconds = ensure_compiled(prep, say=compiled is None)  # the demo says it on its own line
+        if seconds is not None and compiled is not None:
+            compiled.append(seconds)
         result = run_prepared(prep)
     except PlantDiverged as exc:
         raise UserError(f"{file}: {exc}") from None
@@ -289,8 +291,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         print(f"[{i}/{len(cases) + 1}] {name} ...", end="", flush=True)
         data, file = load_scenario_data(name)
-        result, metrics, notes = _run_and_write(data, file, None, out / name)
-        print(f" done in {time.perf_counter() - t0:.1f} s -> {out / name}/")
+        compiled: list[float] = []
+        result, metrics, notes = _run_and_write(data, file, None, out / name, compiled=compiled)
+        print(f" done in {time.perf_counter() - t0:.1f} s" + (f" (compiling its loop {compiled[0]:.1f} s)" if compiled else "")
+              + f" -> {out / name}/")
         for n in notes:
             print(f"  note: {n}")
         rows.append((name, metrics))

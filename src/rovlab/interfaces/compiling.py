@@ -34,22 +34,25 @@ def announce_compile(loops: list[tuple[str, str, float] | None]) -> None:
 
     todo = list(dict.fromkeys(what for key, what, _ in filter(None, loops) if needs_compiling(key)))
     if todo:
-        print(f"compiling {' and '.join(todo)} (once per machine: numba caches "
-              f"{'it' if len(todo) == 1 else 'them'}; about 30 s each on 2 cores) ...", file=sys.stderr, flush=True)
+        print(f"compiling {', '.join(todo)} (once per machine: numba caches {'it' if len(todo) == 1 else 'them'}; "
+              f"up to ~30 s {'' if len(todo) == 1 else 'each '}on 2 cores, less when they share kernels) ...",
+              file=sys.stderr, flush=True)
 
 
-def ensure_compiled(prep: Any) -> float | None:
-    """Compile the loop a prepared run needs if numba has not cached it yet, saying so and how
-    long it took; the seconds, or None if it was cached."""
+def ensure_compiled(prep: Any, *, say: bool = True) -> float | None:
+    """Compile the loop a prepared run needs if numba has not cached it yet, saying so (unless
+    not ``say``: the caller says it) and how long it took; the seconds, or None if it was cached."""
     from rovlab.sim.compile import compile_loop, needs_compiling
 
     if not needs_compiling(prep.loop_key):
         return None
     sc = prep.scenario
     what = f"the {sc.estimator or prep.config.estimator} + {sc.controller or prep.config.controller} loop ({sc.plant} plant)"
-    print(f"compiling {what} (once per machine: numba caches it for later runs) ...", file=sys.stderr, flush=True)
+    if say:
+        print(f"compiling {what} (once per machine: numba caches it for later runs) ...", file=sys.stderr, flush=True)
     seconds = compile_loop(prep)
-    print(f"compiled {what} in {seconds:.1f} s", file=sys.stderr, flush=True)
+    if say:
+        print(f"compiled {what} in {seconds:.1f} s", file=sys.stderr, flush=True)
     return seconds
 
 
