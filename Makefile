@@ -13,10 +13,12 @@ VENV_ROS1 := .venv-ros1
 
 .PHONY: demo test lint test-slow bench clean clean-cache ros2-env ros1-env
 
-$(STAMP): pyproject.toml
+# the plugin example (examples/plugin: a complementary filter and a PD law found through entry
+# points) is installed too: the test suite runs a scenario, a Monte Carlo and the HMI with it
+$(STAMP): pyproject.toml examples/plugin/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install --quiet -e '.[dev]' -e examples/plugin
 	touch $(STAMP)
 
 # ROS 2 (rclpy wheels from PyPI) in its own environment: its bootstrap .pth re-executes Python
@@ -43,12 +45,12 @@ test: $(STAMP)
 	./scripts/ensure-chromium.sh
 	$(MAKE) --no-print-directory ros2-env
 	$(MAKE) --no-print-directory ros1-env
-	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks examples
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks examples
 	$(BIN)/mypy
 
 test-slow: $(STAMP)

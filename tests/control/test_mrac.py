@@ -297,7 +297,7 @@ def test_a_configuration_without_mrac_table_gets_the_defaults(udrone):
     data = read_toml(packaged_config_path("thesis"))
     del data["mrac"]
     cfg = design_config_from_dict(data, file="cfg.toml")
-    assert not cfg.mrac.given and cfg.mrac.k_s == 80.0
+    assert not cfg.table("mrac").given and cfg.table("mrac").k_s == 80.0
     assert mrac.build(udrone, cfg).model.sampled_radius < 1.0
 
 

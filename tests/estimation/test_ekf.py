@@ -11,9 +11,10 @@ import pytest
 from scipy.linalg import expm
 
 from rovlab.estimation import ekf, kf
+from rovlab.estimation.ekf import EKFConfig
 from rovlab.estimation.fusion import N_REP
 from rovlab.models import kinetics as kin
-from rovlab.params.design import EKFConfig, MeasurementConfig, load_design_config
+from rovlab.params.design import MeasurementConfig, load_design_config
 from rovlab.params.validate import ConfigError
 from rovlab.params.vehicle import load_vehicle
 
@@ -46,7 +47,7 @@ def _pair():
                    bias_psd=np.array([1e-3, 1e-3, cfg.psd[4], cfg.psd[5]]),
                    bias_time_constant_s=np.array([60.0, 60.0, T_w, T_r]), substeps=10,
                    initial_state=x12, initial_std=std12, dead_reckoning=("x", "y", "u", "v", "b_X", "b_Y"))
-    espec = ekf.build(vehicle, replace(cfg, ekf=ec))
+    espec = ekf.build(vehicle, cfg.with_table("ekf", ec))
     return kspec, espec
 
 
@@ -176,10 +177,11 @@ def test_dead_reckoning_accepts_what_the_user_names():
     keep = tuple(m for m in cfg.measurements if m.kind != "motion_capture")
     # without motion capture neither the position nor the heading is seen (yaw rate only)
     dead = ("x", "y", "psi")
-    spec = ekf.build(vehicle, replace(cfg, measurements=keep, ekf=replace(cfg.ekf, dead_reckoning=dead)))
+    spec = ekf.build(vehicle, replace(cfg, measurements=keep).with_table("ekf", replace(cfg.table("ekf"), dead_reckoning=dead)))
     assert set(spec.model.dead_reckoned) == set(dead)
     with pytest.raises(ConfigError, match="psi"):
-        ekf.build(vehicle, replace(cfg, measurements=keep, ekf=replace(cfg.ekf, dead_reckoning=("x", "y"))))
+        ekf.build(vehicle, replace(cfg, measurements=keep).with_table(
+            "ekf", replace(cfg.table("ekf"), dead_reckoning=("x", "y"))))
 
 
 def test_kf_refuses_a_planar_measurement_clearly():

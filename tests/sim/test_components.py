@@ -10,11 +10,19 @@ import numpy as np
 import pytest
 from numba import njit
 
-from rovlab.core.components import ControllerSpec, fresh, register_controller, restore, state_fields, state_of
+from rovlab.core.components import (
+    _COMPONENTS,
+    ComponentInfo,
+    ControllerSpec,
+    fresh,
+    register_controller,
+    restore,
+    state_fields,
+    state_of,
+)
 from rovlab.io.logs import read_log
 from rovlab.params.design import design_config_from_dict, packaged_config_path
 from rovlab.params.validate import ConfigError, read_toml
-from rovlab.sim import components as registry
 from rovlab.sim.live import LiveSimulation
 from rovlab.sim.montecarlo import run_many
 from rovlab.sim.runner import PlantDiverged, Simulation, first_rows, prepare, run_prepared
@@ -55,7 +63,7 @@ def _build_hold(vehicle, config):
 
 @pytest.fixture
 def hold_registered(monkeypatch):
-    monkeypatch.setitem(registry.CONTROLLERS, "hold", _build_hold)
+    monkeypatch.setitem(_COMPONENTS["controller"], "hold", ComponentInfo("hold", "controller", _build_hold))
 
 
 def test_a_new_controller_is_one_module_plus_its_registration(hold_registered):
@@ -102,7 +110,7 @@ def test_a_kernel_that_allocates_inside_the_loop_is_refused_with_the_line_and_th
         return ControllerSpec(kernel=AllocatingDepth(40.0, np.zeros(0)), needs=("z",), references=("z",),
                               outputs=("Z",), state_names=())
 
-    monkeypatch.setitem(registry.CONTROLLERS, "allocating", build)
+    monkeypatch.setitem(_COMPONENTS["controller"], "allocating", ComponentInfo("allocating", "controller", build))
     from dataclasses import replace
 
     prep = prepare(replace(load_scenario("step-process-model"), controller="allocating"))
@@ -117,11 +125,16 @@ def test_a_kernel_that_allocates_inside_the_loop_is_refused_with_the_line_and_th
 def test_unknown_components_and_missing_estimates_are_refused_by_name():
     data = read_toml(packaged_config_path("thesis"))
     data["controller"] = "pid-of-my-dreams"
-    cfg = design_config_from_dict(data, file="my.toml")
-    with pytest.raises(ConfigError) as err:
-        prepare(load_scenario("step-process-model"), config=cfg)
+    with pytest.raises(ConfigError) as err:  # refused when the file is read, with the names there are
+        design_config_from_dict(data, file="my.toml")
     msg = str(err.value)
     assert "my.toml" in msg and "controller" in msg and "pid-of-my-dreams" in msg and "lqg" in msg
+    # and when a scenario names one
+    from dataclasses import replace
+
+    with pytest.raises(ConfigError) as err:
+        prepare(replace(load_scenario("step-process-model"), controller="pid-of-my-dreams"))
+    assert "controller" in str(err.value) and "mrac" in str(err.value)
 
 
 def test_a_controller_needing_what_the_estimator_lacks_is_refused(monkeypatch):
@@ -129,7 +142,7 @@ def test_a_controller_needing_what_the_estimator_lacks_is_refused(monkeypatch):
         spec = _build_hold(vehicle, config)
         return ControllerSpec(kernel=spec.kernel, needs=("x", "z"), references=("z",), outputs=("Z",))
 
-    monkeypatch.setitem(registry.CONTROLLERS, "needs-x", needs_x)
+    monkeypatch.setitem(_COMPONENTS["controller"], "needs-x", ComponentInfo("needs-x", "controller", needs_x))
     from dataclasses import replace
 
     with pytest.raises(ConfigError, match="estimates x"):

@@ -44,10 +44,10 @@ def test_pole_placement_puts_each_axis_at_its_bandwidth(udrone, cfg):
     """K_p = M w^2, K_d = 2 zeta w M - D (Fossen 2011, sec. 12.2): the closed loop
     M s^2 + (D + K_d) s + K_p of each axis has its poles at -zeta w +- w sqrt(zeta^2 - 1)."""
     d = dp.design(udrone, cfg)
-    for i, w in enumerate(cfg.dp.bandwidth):
+    for i, w in enumerate(cfg.table("dp").bandwidth):
         poles = np.roots([d.M[i], d.D[i] + d.Kd[i], d.Kp[i]])
-        np.testing.assert_allclose(poles.real, -cfg.dp.damping * w, rtol=1e-6)
-        assert d.Ki[i] == pytest.approx(cfg.dp.integral_ratio * w * d.Kp[i])
+        np.testing.assert_allclose(poles.real, -cfg.table("dp").damping * w, rtol=1e-6)
+        assert d.Ki[i] == pytest.approx(cfg.table("dp").integral_ratio * w * d.Kp[i])
 
 
 def test_reference_model_is_smooth_speed_limited_and_arrives():
@@ -100,7 +100,7 @@ def test_back_calculation_stops_integral_windup(udrone, cfg):
     """Astrom & Hagglund 2006, sec. 3.5: with the thrusters saturated (nothing achieved) and a
     persistent error the integral stays bounded with back-calculation and grows without it."""
     def integral_after(anti_windup):
-        c = dp.build(udrone, replace(cfg, dp=replace(cfg.dp, anti_windup=anti_windup))).kernel
+        c = dp.build(udrone, cfg.with_table("dp", replace(cfg.table("dp"), anti_windup=anti_windup))).kernel
         nav = np.zeros(12)
         nav[2] = 1.0
         tau = np.empty(4)
@@ -114,7 +114,7 @@ def test_back_calculation_stops_integral_windup(udrone, cfg):
     # without: the integral of a 3 m error over 300 s; with: the equilibrium of
     # xi' = e - (k_t / K_i)(K_p e + K_i xi) = 0, |xi| = e (k_t K_p / K_i - 1) / k_t = 3 * 9 / 0.6 = 45
     assert without == pytest.approx(900.0, rel=0.05)  # less the reference model's first seconds
-    assert with_aw == pytest.approx(3.0 * (10.0 - 1.0) / cfg.dp.bandwidth[0], rel=0.02)
+    assert with_aw == pytest.approx(3.0 * (10.0 - 1.0) / cfg.table("dp").bandwidth[0], rel=0.02)
 
 
 def test_bad_dp_and_ekf_keys_are_refused_with_file_key_value(tmp_path):
@@ -283,4 +283,4 @@ def test_bluerov2_heavy_dp_designs_on_stock_sensors_and_runs():
     assert abs(m["setpoint_error_final"]["z"]) < 0.05
     # without dead_reckoning the same sensors are refused, naming the horizontal states
     with pytest.raises(ConfigError, match="x, y"):
-        build_pair(vehicle, replace(cfg, ekf=replace(cfg.ekf, dead_reckoning=())))
+        build_pair(vehicle, cfg.with_table("ekf", replace(cfg.table("ekf"), dead_reckoning=())))

@@ -41,18 +41,40 @@ the last NED error and a started flag.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
 from rovlab._jit import njit
 from rovlab.core.angles import wrap_angle
-from rovlab.core.components import ControllerSpec, register_controller
+from rovlab.core.components import ComponentInfo, ControllerSpec, register_component, register_controller
 from rovlab.models import kinetics as kin
-from rovlab.params.design import DP_AXES, DesignConfig, DPConfig
-from rovlab.params.validate import ConfigError, Problem
+from rovlab.params.design import DP_AXES, DesignConfig, per_key
+from rovlab.params.validate import ConfigError, Problem, TableReader
 from rovlab.params.vehicle import Vehicle
+
+_DEG = math.pi / 180.0
+
+
+@dataclass(frozen=True, eq=False)
+class DPConfig:
+    """The [dp] table: the dynamic-positioning controller (rovlab.control.dp), SI and radians.
+
+    Per axis (x, y, z, psi): closed-loop natural frequency ``bandwidth`` [rad/s] and relative
+    damping of the PID pole placement; reference-model natural frequency and speed limit.
+    """
+
+    bandwidth: np.ndarray = field(default_factory=lambda: np.array([0.6, 0.6, 0.6, 0.8]))
+    damping: float = 1.0
+    integral_ratio: float = 0.1  # K_i = integral_ratio * omega_n * K_p (Fossen 2011, sec. 12.2)
+    reference_bandwidth: np.ndarray = field(default_factory=lambda: np.array([0.4, 0.4, 0.4, 0.5]))
+    reference_damping: float = 1.0
+    max_speed: np.ndarray = field(default_factory=lambda: np.array([0.15, 0.15, 0.15, math.radians(20.0)]))
+    anti_windup: float = 1.0  # back-calculation gain (times omega_n) when the thrusters saturate; 0 = off
+    source: str = "rovlab defaults (rovlab.control.dp.DPConfig)"
+    given: bool = False
+
 
 STATE_NAMES = (
     *(f"{a}_d" for a in DP_AXES), *(f"{a}_d_dot" for a in DP_AXES), *(f"{a}_d_ddot" for a in DP_AXES),
@@ -188,7 +210,7 @@ def design(vehicle: Vehicle, config: DesignConfig) -> DPDesign:
     """Pole placement per axis (Fossen 2011, sec. 12.2): K_p = M omega_n^2,
     K_d = 2 zeta omega_n M - D, K_i = integral_ratio omega_n K_p. Raises ConfigError when an axis
     would need negative derivative gain (its own damping already exceeds the design's)."""
-    dc = config.dp
+    dc = config.table("dp")
     M = np.diag(kin.mass_matrix(vehicle)).copy()
     D = -np.asarray(vehicle.damping_linear, dtype=float)
     wn = np.asarray(dc.bandwidth, dtype=float)
@@ -206,7 +228,7 @@ def design(vehicle: Vehicle, config: DesignConfig) -> DPDesign:
 def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:
     """The DP component of a configuration (raises ConfigError)."""
     d = design(vehicle, config)
-    dc = config.dp
+    dc = config.table("dp")
     kernel = DP(d.Kp, d.Ki, d.Kd, d.M, d.D, -np.asarray(vehicle.damping_quadratic, dtype=float),
                 -np.asarray(vehicle.damping_cubic, dtype=float), np.array(dc.reference_bandwidth, dtype=float),
                 float(dc.reference_damping),
@@ -214,3 +236,32 @@ def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:
                 float(config.sample_time), np.zeros(len(STATE_NAMES)))
     return ControllerSpec(kernel=kernel, needs=("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N"),
                           references=DP_AXES, outputs=("X", "Y", "Z", "N"), state_names=STATE_NAMES, model=d)
+
+
+def read_dp_table(t: TableReader) -> DPConfig:
+    """Read the [dp] table of a design file with the loader's reader (closed schema; every problem collected)."""
+    base = DPConfig()
+    source = t.string("source")
+    axes = ("x", "y", "z", "psi")
+    speed_keys = ("x", "y", "z", "psi_deg_s")
+    bw = per_key(t, "bandwidth", axes, base.bandwidth, positive=True, what="rad/s")
+    zeta = t.number("damping", base.damping, positive=True, hi=10.0, what="relative damping of the closed loop")
+    ratio = t.number("integral_ratio", base.integral_ratio, nonnegative=True, hi=1.0,
+                     what="K_i = ratio * omega_n * K_p; 0 = no integral action")
+    rbw = per_key(t, "reference_bandwidth", axes, base.reference_bandwidth, positive=True, what="rad/s")
+    rzeta = t.number("reference_damping", base.reference_damping, positive=True, hi=10.0)
+    speed = per_key(t, "max_speed", speed_keys, base.max_speed / np.array([1, 1, 1, _DEG]),
+                     factors=(1.0, 1.0, 1.0, _DEG), positive=True, what="m/s, or deg/s for psi_deg_s")
+    aw = t.number("anti_windup", base.anti_windup, nonnegative=True, hi=100.0,
+                  what="back-calculation gain relative to omega_n; 0 = off")
+    t.finish()
+    for arr in (bw, rbw, speed):
+        arr.setflags(write=False)
+    return DPConfig(bandwidth=bw, damping=zeta, integral_ratio=ratio, reference_bandwidth=rbw, reference_damping=rzeta,
+                    max_speed=speed, anti_windup=aw, source=source, given=True)
+
+
+register_component(ComponentInfo(
+    "dp", "controller", build,
+    description="dynamic positioning x, y, z, psi: reference model and nonlinear PID (Fossen 2011, ch. 12)",
+    parse_table=read_dp_table, default_table=DPConfig))

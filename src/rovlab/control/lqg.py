@@ -32,7 +32,7 @@ import numpy as np
 from rovlab._jit import njit
 from rovlab.control.lqr import LQRDesign, design_lqr_from_config
 from rovlab.core.angles import wrap_angle
-from rovlab.core.components import ControllerSpec, register_controller
+from rovlab.core.components import ComponentInfo, ControllerSpec, register_component, register_controller
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
 
@@ -111,3 +111,8 @@ def tau_to_wrench(tau: np.ndarray) -> np.ndarray:
     """The 4-DOF wrench [X, Y, Z, N] = [0, 0, Z, N] of a depth-and-heading demand [Z, N]."""
     Z, N = np.asarray(tau, dtype=float).ravel()
     return np.array([0.0, 0.0, Z, N])
+
+
+register_component(ComponentInfo(
+    "lqg", "controller", build,
+    description="LQR depth and heading with the filter's bias estimate fed forward (Sandøy 2016, sec. 5.2)"))

@@ -55,7 +55,8 @@ the component).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -63,11 +64,36 @@ import numpy as np
 from rovlab._jit import njit
 from rovlab.control.lqg import lqg_tau
 from rovlab.control.lqr import LQRDesign, design_lqr_from_config
-from rovlab.core.components import ControllerSpec, register_controller
+from rovlab.core.components import ComponentInfo, ControllerSpec, register_component, register_controller
 from rovlab.models.discretise import zoh
-from rovlab.params.design import MRAC_PARAMETERS, DesignConfig, MRACConfig
-from rovlab.params.validate import ConfigError, Problem
+from rovlab.params.design import DesignConfig
+from rovlab.params.validate import ConfigError, Problem, TableReader
 from rovlab.params.vehicle import Vehicle
+
+MRAC_PARAMETERS = ("M", "D_l", "D_q", "F")  # heave mass, linear and quadratic damping, net down force
+
+
+@dataclass(frozen=True)
+class MRACConfig:
+    """The [mrac] table: reference model, adaptation gains and the projection set (SI units).
+
+    ``initial`` and ``bounds`` hold only what the file gives; the rest is filled from the model
+    by rovlab.control.mrac (which also checks that the initial estimates lie in the bounds).
+    """
+
+    bandwidth: float = 0.6  # omega_m [rad/s]
+    damping: float = 1.0  # zeta_m
+    max_step: float = 0.5  # [m]
+    lam: float = 2.0  # lambda [1/s]
+    k_s: float = 80.0  # [N s/m]
+    sigma: float = 0.0  # [1/s]
+    hedge: bool = True
+    gain: Mapping[str, float] = field(default_factory=lambda: {"M": 50.0, "D_l": 50.0, "D_q": 50.0, "F": 300.0})
+    initial: Mapping[str, float] = field(default_factory=dict)
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    source: str = "rovlab defaults, tuned in simulation on the heave-* scenarios (rovlab.control.mrac)"
+    given: bool = False  # the file had an [mrac] table
+
 
 STATE_NAMES = ("M_hat", "D_l_hat", "D_q_hat", "F_hat", "z_m", "w_m")  # log columns ctrl_<name>
 PARAMETERS = MRAC_PARAMETERS  # theta = [M, D_l, D_q, F]
@@ -253,7 +279,7 @@ def default_bounds(theta0: np.ndarray, weight: float) -> tuple[np.ndarray, np.nd
 
 def design_mrac(vehicle: Vehicle, config: DesignConfig) -> MRACDesign:
     """Check the [mrac] table against the model and design the reference model (ConfigError)."""
-    c = config.mrac
+    c = config.table("mrac")
     where = config.file or config.name
     h = float(config.sample_time)
     problems: list[Problem] = []
@@ -329,3 +355,52 @@ def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:
                   state, np.zeros(1))
     return ControllerSpec(kernel=kernel, needs=("z", "psi", "w", "r", "b_N"), references=("z", "psi"),
                           outputs=("Z", "N"), state_names=STATE_NAMES, model=d)
+
+
+def read_mrac_table(t: TableReader) -> MRACConfig:
+    """Read the [mrac] table of a design file with the loader's reader (closed schema; every problem collected)."""
+    base = MRACConfig()
+    source = t.string("source")
+    omega = t.number("bandwidth", base.bandwidth, positive=True, hi=100.0, what="omega_m of the reference model in rad/s")
+    zeta = t.number("damping", base.damping, positive=True, hi=10.0, what="zeta_m of the reference model")
+    step = t.number("max_step", base.max_step, positive=True, what="depth step in m the thrusters must manage")
+    lam = t.number("lambda", base.lam, positive=True, what="1/s, in s = e_dot + lambda e")
+    k_s = t.number("k_s", base.k_s, positive=True, what="N s/m, feedback on s")
+    sigma = t.number("sigma", base.sigma, nonnegative=True, what="1/s, sigma-modification; 0 = off")
+    hedge = t.boolean("hedge", base.hedge)
+    gain = dict(base.gain)
+    g = t.table("gain", required=False)
+    for key in MRAC_PARAMETERS:
+        if g.has(key):
+            gain[key] = g.number(key, nonnegative=True, what="adaptation gain; 0 freezes the parameter")
+    g.finish()
+    initial: dict[str, float] = {}
+    it = t.table("initial", required=False)
+    for key in MRAC_PARAMETERS:
+        if it.has(key):
+            initial[key] = it.number(key, positive=key == "M", nonnegative=key in ("D_l", "D_q"),
+                                     what={"M": "kg", "D_l": "N s/m", "D_q": "N s^2/m^2", "F": "N, down"}[key])
+    it.finish()
+    bounds: dict[str, tuple[float, float]] = {}
+    bt = t.table("bounds", required=False)
+    for key in MRAC_PARAMETERS:
+        if bt.has(key):
+            lo, hi = bt.vector(key, 2, what="[lowest, highest]")
+            if np.all(np.isfinite([lo, hi])):
+                floor = 0.0 if key != "F" else -math.inf
+                if not lo < hi:
+                    bt.problem(key, [lo, hi], "[lowest, highest] with lowest < highest")
+                elif lo < floor or (key == "M" and lo <= 0.0):
+                    bt.problem(key, [lo, hi], "a positive lower bound for M, >= 0 for D_l and D_q")
+                else:
+                    bounds[key] = (float(lo), float(hi))
+    bt.finish()
+    t.finish()
+    return MRACConfig(bandwidth=omega, damping=zeta, max_step=step, lam=lam, k_s=k_s, sigma=sigma, hedge=hedge,
+                      gain=gain, initial=initial, bounds=bounds, source=source, given=True)
+
+
+register_component(ComponentInfo(
+    "mrac", "controller", build,
+    description="model-reference adaptive heave control with LQR heading (Sandøy 2016, thesis description, task 7)",
+    parse_table=read_mrac_table, default_table=MRACConfig))

@@ -248,6 +248,124 @@ _install_overloads()
 
 
 # --------------------------------------------------------------------------------------------
+# Which estimators and controllers exist: each declares itself (ComponentInfo), shipped or not
+# --------------------------------------------------------------------------------------------
+
+KINDS = ("estimator", "controller")
+# The components that ship with rovlab, by name -> the module that declares them. Components of
+# other packages are found through Python entry points in the groups ENTRY_POINT_GROUPS, whose
+# name is the component's name and whose value is the module that declares it (importing it calls
+# register_component), e.g. in a plugin's pyproject.toml:
+#     [project.entry-points."rovlab.estimators"]
+#     complementary = "rovlab_example_plugin.complementary"
+SHIPPED = {
+    "estimator": {"kf": "rovlab.estimation.kf", "ekf": "rovlab.estimation.ekf"},
+    "controller": {"lqg": "rovlab.control.lqg", "mrac": "rovlab.control.mrac", "dp": "rovlab.control.dp"},
+}
+ENTRY_POINT_GROUPS = {"estimator": "rovlab.estimators", "controller": "rovlab.controllers"}
+
+
+@dataclass(frozen=True, eq=False)
+class ComponentInfo:
+    """What an estimator or a controller declares about itself (its module calls
+    :func:`register_component` with it when imported).
+
+    ``build(vehicle, config)`` designs it from a vehicle and a design configuration
+    (rovlab.params.design.DesignConfig) and returns an :class:`EstimatorSpec` or
+    :class:`ControllerSpec`. A component may own a table of the design file named after it
+    (``[mrac]``, ``[pd]``): ``parse_table(reader)`` reads it with the loader's own TableReader
+    (rovlab.params.validate: the same checks and messages; the table's keys are closed), and
+    ``default_table()`` gives the value a file without the table gets; the design reads it as
+    ``config.table(name)``. An estimator names the quantities a measurement may give it
+    (``measurable``, e.g. z, psi, w, r).
+    """
+
+    name: str
+    kind: str  # "estimator" or "controller"
+    build: Callable[..., Any]
+    description: str = ""
+    parse_table: Callable[[Any], Any] | None = None
+    default_table: Callable[[], Any] | None = None
+    measurable: tuple[str, ...] = ()
+
+
+_COMPONENTS: dict[str, dict[str, ComponentInfo]] = {k: {} for k in KINDS}
+_FAILED: dict[str, dict[str, str]] = {k: {} for k in KINDS}  # name -> why its module did not load
+
+
+def register_component(info: ComponentInfo) -> None:
+    """Declare an estimator or a controller (called by its module when imported)."""
+    if info.kind not in KINDS:
+        raise ValueError(f"component {info.name!r}: kind must be one of {', '.join(KINDS)}, got {info.kind!r}")
+    if not info.name or not info.name.replace("_", "").replace("-", "").isalnum():
+        raise ValueError(f"component name {info.name!r}: letters, digits, '-' and '_' only")
+    if (info.parse_table is None) != (info.default_table is None):
+        raise ValueError(f"component {info.name!r}: parse_table and default_table go together")
+    _COMPONENTS[info.kind][info.name] = info
+
+
+def _declared(kind: str) -> dict[str, Callable[[], Any]]:
+    """name -> how to import the module that declares it: the shipped ones, then entry points."""
+    import functools
+    import importlib
+
+    out: dict[str, Callable[[], Any]] = {}
+    for name, module in SHIPPED[kind].items():
+        out[name] = functools.partial(importlib.import_module, module)
+    found: Any = ()
+    try:
+        from importlib.metadata import entry_points
+
+        found = entry_points(group=ENTRY_POINT_GROUPS[kind])
+    except Exception:  # noqa: BLE001 - broken package metadata must not stop rovlab
+        pass
+    for ep in found:
+        if ep.name not in out:  # a shipped name cannot be taken over
+            out[ep.name] = ep.load
+    return out
+
+
+def component_names(kind: str) -> tuple[str, ...]:
+    """Every estimator or controller name there is (shipped and installed plugins), without
+    importing them."""
+    return tuple(dict.fromkeys([*_declared(kind), *_COMPONENTS[kind]]))
+
+
+def component(kind: str, name: str) -> ComponentInfo | None:
+    """The declaration of a component (importing its module the first time), or None if there is
+    no such component or its module failed to load (:func:`load_failure` says why)."""
+    if name in _COMPONENTS[kind]:
+        return _COMPONENTS[kind][name]
+    load = _declared(kind).get(name)
+    if load is None:
+        return None
+    try:
+        loaded = load()
+    except Exception as exc:  # noqa: BLE001 - a broken plugin is reported by name, not a traceback
+        _FAILED[kind][name] = f"{type(exc).__name__}: {exc}"
+        return None
+    if isinstance(loaded, ComponentInfo):
+        register_component(loaded)
+    info = _COMPONENTS[kind].get(name)
+    if info is None:
+        _FAILED[kind][name] = "its module declared no component of that name (register_component)"
+    return info
+
+
+def load_failure(kind: str, name: str) -> str | None:
+    """Why a declared component could not be loaded (None if it loaded or was never tried)."""
+    return _FAILED[kind].get(name)
+
+
+def unknown_component(kind: str, name: str) -> str:
+    """What to say of an estimator or controller name that :func:`component` did not find."""
+    why = load_failure(kind, name)
+    if why is not None:
+        return f"a component that loads ({kind} {name!r} failed to: {why})"
+    return "one of: " + ", ".join(component_names(kind))
+
+
+# --------------------------------------------------------------------------------------------
 # What a component's builder returns (Python side: names and sizes for logs, checks, display)
 # --------------------------------------------------------------------------------------------
 

@@ -36,21 +36,49 @@ dead-reckon, e.g. x and y without a position fix).
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
 
 from rovlab._jit import WITH_NRT, njit, plain
 from rovlab.core.angles import wrap_angle
-from rovlab.core.components import EstimatorSpec, register_estimator
+from rovlab.core.components import ComponentInfo, EstimatorSpec, register_component, register_estimator
 from rovlab.estimation.fusion import new_channel_state
 from rovlab.estimation.kalman import correct_arrays, work_size
 from rovlab.estimation.model import channel_config, make_channels, observability, startup_time, unobservable_problem
 from rovlab.models import kinetics as kin
-from rovlab.params.design import EKF_STATES, DesignConfig
-from rovlab.params.validate import ConfigError, Problem
+from rovlab.params.design import BIAS_TIME_RANGE, DOFS, EKF_MEASURABLE, EKF_STATES, DesignConfig, per_key
+from rovlab.params.validate import ConfigError, Problem, TableReader
 from rovlab.params.vehicle import Vehicle
+
+_DEG = math.pi / 180.0
+_EKF_STATE_KEYS = {"x": (0, 1.0), "y": (1, 1.0), "z": (2, 1.0), "psi_deg": (3, _DEG), "u": (4, 1.0),
+                   "v": (5, 1.0), "w": (6, 1.0), "r_deg_s": (7, _DEG), "b_X": (8, 1.0), "b_Y": (9, 1.0),
+                   "b_Z": (10, 1.0), "b_N": (11, 1.0)}
+
+
+@dataclass(frozen=True, eq=False)
+class EKFConfig:
+    """The [ekf] table: noise model and initial belief of the 4-DOF EKF (rovlab.estimation.ekf), SI.
+
+    force_psd: white force/moment noise W on [X, Y, Z, N] (enters like tau); bias_psd and
+    bias_time_constant_s: the Gauss-Markov bias per DOF (b_dot = -b/T + w_b, w_b of PSD bias_psd);
+    current: a known constant current (NED, m/s; 0 = unknown, left to the biases).
+    """
+
+    force_psd: np.ndarray = field(default_factory=lambda: np.array([1e-2, 1e-2, 1e-2, 1e-4]))
+    bias_psd: np.ndarray = field(default_factory=lambda: np.array([2e-3, 2e-3, 3e-3, 1e-6]))
+    bias_time_constant_s: np.ndarray = field(default_factory=lambda: np.full(4, 60.0))
+    current: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    substeps: int = 10  # RK4 steps per sample in the prediction
+    dead_reckoning: tuple[str, ...] = ()  # states accepted as unobservable (e.g. x, y without a position fix)
+    initial_state: np.ndarray = field(default_factory=lambda: np.zeros(12))
+    initial_std: np.ndarray = field(default_factory=lambda: np.array(
+        [1.0, 1.0, 1.0, math.pi, 0.5, 0.5, 0.5, math.radians(30.0), 10.0, 10.0, 10.0, 1.0]))
+    source: str = "rovlab defaults (rovlab.estimation.ekf.EKFConfig)"
+    given: bool = False
+
 
 N_X = 12
 STATE_OF_QUANTITY = {q: i for i, q in enumerate(EKF_STATES[:8])}
@@ -271,7 +299,7 @@ def packed_model(vehicle: Vehicle, config: DesignConfig) -> np.ndarray:
     run to run), so b_Z estimates what rovlab.core.components.TRUTH calls b_Z and the controller's
     bias feed-forward cancels the net weight too."""
     p = kin.pack(vehicle)
-    p[kin.P_VC:kin.P_VC + 3] = config.ekf.current
+    p[kin.P_VC:kin.P_VC + 3] = config.table("ekf").current
     p[kin.P_BUOY] = 0.0
     p[kin.P_WEIGHT] = 0.0
     p[kin.P_GZ] = 0.0
@@ -281,7 +309,7 @@ def packed_model(vehicle: Vehicle, config: DesignConfig) -> np.ndarray:
 def build(vehicle: Vehicle, config: DesignConfig) -> EstimatorSpec:
     """Design the 4-DOF EKF of a configuration (raises ConfigError naming the file and key)."""
     file = config.file or config.name
-    ec = config.ekf
+    ec = config.table("ekf")
     channels, problems = make_channels(vehicle, config, STATE_OF_QUANTITY, estimator="ekf")
     if problems:
         raise ConfigError(problems, "filter configuration")
@@ -356,3 +384,43 @@ class EKFModel(NamedTuple):
     @property
     def states(self) -> tuple[str, ...]:
         return EKF_STATES
+
+
+def read_ekf_table(t: TableReader) -> EKFConfig:
+    """Read the [ekf] table of a design file with the loader's reader (closed schema; every problem collected)."""
+    base = EKFConfig()
+    source = t.string("source")
+    fpsd = per_key(t, "force_psd", DOFS, base.force_psd, nonnegative=True, what="N^2/Hz or (N m)^2/Hz")
+    bpsd = per_key(t, "bias_psd", DOFS, base.bias_psd, nonnegative=True, what="N^2/s per s (PSD of the bias driver)")
+    bT = per_key(t, "bias_time_constant_s", DOFS, base.bias_time_constant_s, positive=True, what="s")
+    for i, k in enumerate(DOFS):
+        if np.isfinite(bT[i]) and not BIAS_TIME_RANGE[0] <= bT[i] <= BIAS_TIME_RANGE[1]:
+            t.problem(f"bias_time_constant_s.{k}", float(bT[i]), f"a time in [{BIAS_TIME_RANGE[0]:g}, "
+                      f"{BIAS_TIME_RANGE[1]:g}] s")
+    cur = per_key(t, "current", ("north", "east", "down"), base.current, what="m/s, NED")
+    substeps = t.integer("substeps", base.substeps, lo=1)
+    dead: list[str] = []
+    if t.has("dead_reckoning"):
+        raw = t.raw("dead_reckoning")
+        if not isinstance(raw, list) or not all(isinstance(v, str) and v in EKF_STATES for v in raw):
+            t.problem("dead_reckoning", raw, "a list of EKF states (" + ", ".join(EKF_STATES) + ")")
+        else:
+            dead = list(raw)
+    if substeps > 1000:
+        t.problem("substeps", substeps, "at most 1000 RK4 steps per sample")
+        substeps = base.substeps
+    keys = tuple(_EKF_STATE_KEYS)
+    factors = tuple(f for _, f in _EKF_STATE_KEYS.values())
+    x0 = per_key(t, "initial_state", keys, base.initial_state / np.array(factors), factors=factors)
+    std = per_key(t, "initial_std", keys, base.initial_std / np.array(factors), factors=factors, nonnegative=True)
+    t.finish()
+    for arr in (fpsd, bpsd, bT, cur, x0, std):
+        arr.setflags(write=False)
+    return EKFConfig(force_psd=fpsd, bias_psd=bpsd, bias_time_constant_s=bT, current=cur, substeps=substeps,
+                     initial_state=x0, initial_std=std, dead_reckoning=tuple(dead), source=source, given=True)
+
+
+register_component(ComponentInfo(
+    "ekf", "estimator", build,
+    description="4-DOF extended Kalman filter on the nonlinear model (Sandøy 2016, further work)",
+    parse_table=read_ekf_table, default_table=EKFConfig, measurable=EKF_MEASURABLE))

@@ -15,11 +15,11 @@ from typing import NamedTuple
 import numpy as np
 
 from rovlab._jit import njit, plain
-from rovlab.core.components import EstimatorSpec, register_estimator
+from rovlab.core.components import ComponentInfo, EstimatorSpec, register_component, register_estimator
 from rovlab.estimation.fusion import new_channel_state
 from rovlab.estimation.kalman import correct_arrays, pack_model, predict_arrays, unpack_model, work_size
 from rovlab.estimation.model import FilterModel, build_filter_model
-from rovlab.params.design import DesignConfig
+from rovlab.params.design import MEASURABLE, DesignConfig
 from rovlab.params.vehicle import Vehicle
 
 # what each state of the depth-and-heading model estimates (rovlab.core.components.TRUTH)
@@ -74,3 +74,8 @@ def build(vehicle: Vehicle, config: DesignConfig) -> EstimatorSpec:
     fm = build_filter_model(vehicle, config)
     return EstimatorSpec(kernel=from_model(fm), states=tuple(fm.states), nav=tuple(_NAV[s] for s in fm.states),
                          channels=tuple(fm.channels), h=fm.h, model=fm)
+
+
+register_component(ComponentInfo(
+    "kf", "estimator", build,
+    description="depth-and-heading Kalman filter with bias states (Sandøy 2016, sec. 5.1)", measurable=MEASURABLE))

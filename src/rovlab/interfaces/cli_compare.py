@@ -26,18 +26,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_comparison(scenario: str, controllers: list[str], runs: int, seed: int | None, out: Path | None, *,
                    figure: bool = True, quiet: bool = False) -> tuple[dict[str, Any], Path, list[str]]:
     """Run, write DIR/comparison.json, comparison.txt and comparison.png; returns (comparison, DIR, notes)."""
+    from rovlab.core.components import component_names
     from rovlab.interfaces.cli import UserError
     from rovlab.sim.compare import compare, table
     from rovlab.sim.compare import figure as draw
-    from rovlab.sim.components import CONTROLLERS
     from rovlab.sim.montecarlo import Progress
     from rovlab.sim.output import write_json
     from rovlab.sim.scenario import load_scenario_data
 
-    unknown = [c for c in controllers if c not in CONTROLLERS]
+    known = component_names("controller")
+    unknown = [c for c in controllers if c not in known]
     if not controllers or unknown:
         raise UserError(f"--controllers: unknown {', '.join(unknown) or '(none given)'}; expected a comma-separated "
-                        "list of: " + ", ".join(CONTROLLERS))
+                        "list of: " + ", ".join(known))
     if len(set(controllers)) != len(controllers):
         raise UserError(f"--controllers: each controller at most once, got {','.join(controllers)}")
     if runs < 1:

@@ -225,7 +225,7 @@ def _print_summary(rows: list[tuple[str, dict[str, Any]]]) -> None:
         rms = m["rms_error"]
         drift = m["dropouts"][0]["heading_drift_rad"] if m.get("dropouts") else None
         nees = m["nees"]["mean"] / m["nees"]["dof"] if m.get("nees") else None
-        print(f"{name:22s} {_fmt(rms['z']):>10s} {_fmt(rms['psi'], deg):>13s} {_fmt(rms['w']):>11s} "
+        print(f"{name:22s} {_fmt(rms.get('z')):>10s} {_fmt(rms.get('psi'), deg):>13s} {_fmt(rms.get('w')):>11s} "
               f"{_fmt(m['settling_time_s'].get('z')):>12s} {_fmt(m['overshoot'].get('z'), 100):>10s}% "
               f"{_fmt(m['settling_time_s'].get('psi')):>14s} {_fmt(drift, deg):>20s} {_fmt(nees):>9s}")
     print("('-': not settled to 2 % within the run -- the thesis's heading LQR is slow, time constant ~17 s;"

@@ -10,7 +10,10 @@ initial belief and the LQR weights. Packaged configurations live in ``params/con
   and psi plus pressure depth; a wide initial covariance so the filter locks on from any start.
 * ``thesis``: the design values of Sandøy 2016 (secs. 5.1-5.2, appendix scripts A.3-A.4).
 
-File format (every table is closed: unknown keys are errors; ``source`` is required)::
+File format (every table is closed: unknown keys are errors; ``source`` is required). Besides the
+tables below, each estimator or controller may own a table named after it (``[mrac]``, ``[ekf]``,
+``[dp]``, a plugin's ``[pd]``), read by the component's own reader with this module's TableReader
+(rovlab.core.components.ComponentInfo) and given to its design as ``config.table(name)``::
 
     name = "thesis"
     source = "where the numbers came from"
@@ -114,12 +117,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from rovlab.core.components import KINDS, component, component_names, unknown_component
 from rovlab.core.weights import bryson_diagonal
 from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
 from rovlab.params.vehicle import PLAUSIBLE, SENSOR_CHANNELS, Sensor, Vehicle
@@ -198,77 +202,6 @@ class MeasurementConfig:
                           "filter configuration")
 
 
-MRAC_PARAMETERS = ("M", "D_l", "D_q", "F")  # heave mass, linear and quadratic damping, net down force
-
-
-@dataclass(frozen=True)
-class MRACConfig:
-    """The [mrac] table: reference model, adaptation gains and the projection set (SI units).
-
-    ``initial`` and ``bounds`` hold only what the file gives; the rest is filled from the model
-    by rovlab.control.mrac (which also checks that the initial estimates lie in the bounds).
-    """
-
-    bandwidth: float = 0.6  # omega_m [rad/s]
-    damping: float = 1.0  # zeta_m
-    max_step: float = 0.5  # [m]
-    lam: float = 2.0  # lambda [1/s]
-    k_s: float = 80.0  # [N s/m]
-    sigma: float = 0.0  # [1/s]
-    hedge: bool = True
-    gain: Mapping[str, float] = field(default_factory=lambda: {"M": 50.0, "D_l": 50.0, "D_q": 50.0, "F": 300.0})
-    initial: Mapping[str, float] = field(default_factory=dict)
-    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    source: str = "rovlab defaults, tuned in simulation on the heave-* scenarios (rovlab.control.mrac)"
-    given: bool = False  # the file had an [mrac] table
-
-
-_EKF_STATE_KEYS = {"x": (0, 1.0), "y": (1, 1.0), "z": (2, 1.0), "psi_deg": (3, _DEG), "u": (4, 1.0),
-                   "v": (5, 1.0), "w": (6, 1.0), "r_deg_s": (7, _DEG), "b_X": (8, 1.0), "b_Y": (9, 1.0),
-                   "b_Z": (10, 1.0), "b_N": (11, 1.0)}
-
-
-@dataclass(frozen=True, eq=False)
-class EKFConfig:
-    """The [ekf] table: noise model and initial belief of the 4-DOF EKF (rovlab.estimation.ekf), SI.
-
-    force_psd: white force/moment noise W on [X, Y, Z, N] (enters like tau); bias_psd and
-    bias_time_constant_s: the Gauss-Markov bias per DOF (b_dot = -b/T + w_b, w_b of PSD bias_psd);
-    current: a known constant current (NED, m/s; 0 = unknown, left to the biases).
-    """
-
-    force_psd: np.ndarray = field(default_factory=lambda: np.array([1e-2, 1e-2, 1e-2, 1e-4]))
-    bias_psd: np.ndarray = field(default_factory=lambda: np.array([2e-3, 2e-3, 3e-3, 1e-6]))
-    bias_time_constant_s: np.ndarray = field(default_factory=lambda: np.full(4, 60.0))
-    current: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    substeps: int = 10  # RK4 steps per sample in the prediction
-    dead_reckoning: tuple[str, ...] = ()  # states accepted as unobservable (e.g. x, y without a position fix)
-    initial_state: np.ndarray = field(default_factory=lambda: np.zeros(12))
-    initial_std: np.ndarray = field(default_factory=lambda: np.array(
-        [1.0, 1.0, 1.0, math.pi, 0.5, 0.5, 0.5, math.radians(30.0), 10.0, 10.0, 10.0, 1.0]))
-    source: str = "rovlab defaults (rovlab.params.design.EKFConfig)"
-    given: bool = False
-
-
-@dataclass(frozen=True, eq=False)
-class DPConfig:
-    """The [dp] table: the dynamic-positioning controller (rovlab.control.dp), SI and radians.
-
-    Per axis (x, y, z, psi): closed-loop natural frequency ``bandwidth`` [rad/s] and relative
-    damping of the PID pole placement; reference-model natural frequency and speed limit.
-    """
-
-    bandwidth: np.ndarray = field(default_factory=lambda: np.array([0.6, 0.6, 0.6, 0.8]))
-    damping: float = 1.0
-    integral_ratio: float = 0.1  # K_i = integral_ratio * omega_n * K_p (Fossen 2011, sec. 12.2)
-    reference_bandwidth: np.ndarray = field(default_factory=lambda: np.array([0.4, 0.4, 0.4, 0.5]))
-    reference_damping: float = 1.0
-    max_speed: np.ndarray = field(default_factory=lambda: np.array([0.15, 0.15, 0.15, math.radians(20.0)]))
-    anti_windup: float = 1.0  # back-calculation gain (times omega_n) when the thrusters saturate; 0 = off
-    source: str = "rovlab defaults (rovlab.params.design.DPConfig)"
-    given: bool = False
-
-
 @dataclass(frozen=True, eq=False)
 class DesignConfig:
     """A validated filter/controller configuration (SI units, radians)."""
@@ -289,11 +222,24 @@ class DesignConfig:
     reference_gain: str  # "discrete" | "continuous"
     sources: Mapping[str, str] = field(default_factory=dict)
     file: str = ""
-    estimator: str = "kf"  # the estimator component (rovlab.sim.components.ESTIMATORS)
-    controller: str = "lqg"  # the controller component (rovlab.sim.components.CONTROLLERS)
-    mrac: MRACConfig = field(default_factory=MRACConfig)  # the optional [mrac] table
-    ekf: EKFConfig = field(default_factory=EKFConfig)  # the optional [ekf] table
-    dp: DPConfig = field(default_factory=DPConfig)  # the optional [dp] table
+    estimator: str = "kf"  # the estimator component (rovlab.core.components.component)
+    controller: str = "lqg"  # the controller component
+    tables: Mapping[str, Any] = field(default_factory=dict)  # the components' tables the file has, parsed
+
+    def table(self, name: str) -> Any:
+        """The component ``name``'s table ([mrac], [ekf], [dp], a plugin's [pd] ...) as parsed from
+        this file, or the component's default when the file has none (rovlab.core.components)."""
+        if name in self.tables:
+            return self.tables[name]
+        for kind in KINDS:
+            info = component(kind, name)
+            if info is not None and info.default_table is not None:
+                return info.default_table()
+        raise KeyError(f"no component {name!r} has a table in design files")
+
+    def with_table(self, name: str, value: Any) -> DesignConfig:
+        """This configuration with the component ``name``'s table replaced by ``value``."""
+        return replace(self, tables={**self.tables, name: value})
 
     @property
     def W(self) -> np.ndarray:
@@ -358,8 +304,14 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     sources["config"] = top.string("source")
     h = top.number("sample_time", positive=True, plausible=SAMPLE_TIME_RANGE,
                    what="filter and controller step in s")
-    estimator = top.string("estimator", "kf")  # checked against the registry when the loop is built
+    estimator = top.string("estimator", "kf")
     controller = top.string("controller", "lqg")
+    estimator_info = component("estimator", estimator) if estimator else None
+    if estimator and estimator_info is None:
+        top.problem("estimator", estimator, unknown_component("estimator", estimator))
+    if controller and component("controller", controller) is None:
+        top.problem("controller", controller, unknown_component("controller", controller))
+    measurable = estimator_info.measurable if estimator_info is not None and estimator_info.measurable else MEASURABLE
 
     overrides: dict[str, float] = {}
     if top.has("model"):
@@ -413,8 +365,8 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
 
     measurements: list[MeasurementConfig] = []
     for mr in top.tables("measurements", min_count=1):
-        # the depth-and-heading filter fuses z, psi, w, r; the 4-DOF EKF x, y, u, v too
-        measurements.append(_measurement(mr, defaults, EKF_MEASURABLE if estimator == "ekf" else MEASURABLE))
+        # what the chosen estimator can fuse (the depth-and-heading filter z, psi, w, r; the 4-DOF EKF x, y, u, v too)
+        measurements.append(_measurement(mr, defaults, measurable))
     seen: dict[tuple[str | None, str | None, str], str] = {}
     for m in measurements:
         ident = (m.sensor, m.kind, m.quantity)
@@ -434,15 +386,22 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
                        "that 1/max^2 overflows is not a limit")
     reference = lt.string("reference_gain", "discrete", choices=("discrete", "continuous"))
     lt.finish()
-    mrac = _mrac_table(top.table("mrac", required=False), present=top.has("mrac"))
-    if mrac.given:
-        sources["mrac"] = mrac.source
-    ekf = _ekf_table(top.table("ekf", required=False), present=top.has("ekf"))
-    if ekf.given:
-        sources["ekf"] = ekf.source
-    dp = _dp_table(top.table("dp", required=False), present=top.has("dp"))
-    if dp.given:
-        sources["dp"] = dp.source
+    # the components' own tables, each named after its component and read by the component's parser
+    tables: dict[str, Any] = {}
+    for kind in KINDS:
+        for cname in component_names(kind):
+            if not top.has(cname) or cname in tables:
+                continue
+            info = component(kind, cname)
+            if info is None or info.parse_table is None:
+                top.problem(cname, "a table", f"no such table: {kind} {cname!r} "
+                            + ("has none" if info is not None else unknown_component(kind, cname)))
+                top.raw(cname, None)
+                continue
+            tables[cname] = info.parse_table(top.table(cname))
+            source = getattr(tables[cname], "source", None)
+            if isinstance(source, str):
+                sources[cname] = source
     top.finish()
     col.raise_if_any("filter configuration")
 
@@ -453,11 +412,11 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         bias_time_per_mass=per_mass, bias_time_constant=constants, measurements=tuple(measurements),
         initial_state=x0, initial_std=std, lqr_Q=Q, lqr_R=R, lqr_bryson=bryson,
         reference_gain=reference, sources=sources, file=file, estimator=estimator, controller=controller,
-        mrac=mrac, ekf=ekf, dp=dp,
+        tables=tables,
     )
 
 
-def _per_key(t: TableReader, name: str, keys: tuple[str, ...], base: np.ndarray, *, factors: tuple[float, ...] | None = None,
+def per_key(t: TableReader, name: str, keys: tuple[str, ...], base: np.ndarray, *, factors: tuple[float, ...] | None = None,
              positive: bool = False, nonnegative: bool = False, what: str = "") -> np.ndarray:
     """An inline table of numbers per key (missing keys keep ``base``), times ``factors``."""
     out = np.array(base, dtype=float)
@@ -468,67 +427,6 @@ def _per_key(t: TableReader, name: str, keys: tuple[str, ...], base: np.ndarray,
                 factors[i] if factors else 1.0)
     sub.finish()
     return out
-
-
-def _ekf_table(t: TableReader, *, present: bool) -> EKFConfig:
-    """The optional [ekf] table (closed schema; every problem collected)."""
-    base = EKFConfig()
-    if not present:
-        return base
-    source = t.string("source")
-    fpsd = _per_key(t, "force_psd", DOFS, base.force_psd, nonnegative=True, what="N^2/Hz or (N m)^2/Hz")
-    bpsd = _per_key(t, "bias_psd", DOFS, base.bias_psd, nonnegative=True, what="N^2/s per s (PSD of the bias driver)")
-    bT = _per_key(t, "bias_time_constant_s", DOFS, base.bias_time_constant_s, positive=True, what="s")
-    for i, k in enumerate(DOFS):
-        if np.isfinite(bT[i]) and not BIAS_TIME_RANGE[0] <= bT[i] <= BIAS_TIME_RANGE[1]:
-            t.problem(f"bias_time_constant_s.{k}", float(bT[i]), f"a time in [{BIAS_TIME_RANGE[0]:g}, "
-                      f"{BIAS_TIME_RANGE[1]:g}] s")
-    cur = _per_key(t, "current", ("north", "east", "down"), base.current, what="m/s, NED")
-    substeps = t.integer("substeps", base.substeps, lo=1)
-    dead: list[str] = []
-    if t.has("dead_reckoning"):
-        raw = t.raw("dead_reckoning")
-        if not isinstance(raw, list) or not all(isinstance(v, str) and v in EKF_STATES for v in raw):
-            t.problem("dead_reckoning", raw, "a list of EKF states (" + ", ".join(EKF_STATES) + ")")
-        else:
-            dead = list(raw)
-    if substeps > 1000:
-        t.problem("substeps", substeps, "at most 1000 RK4 steps per sample")
-        substeps = base.substeps
-    keys = tuple(_EKF_STATE_KEYS)
-    factors = tuple(f for _, f in _EKF_STATE_KEYS.values())
-    x0 = _per_key(t, "initial_state", keys, base.initial_state / np.array(factors), factors=factors)
-    std = _per_key(t, "initial_std", keys, base.initial_std / np.array(factors), factors=factors, nonnegative=True)
-    t.finish()
-    for arr in (fpsd, bpsd, bT, cur, x0, std):
-        arr.setflags(write=False)
-    return EKFConfig(force_psd=fpsd, bias_psd=bpsd, bias_time_constant_s=bT, current=cur, substeps=substeps,
-                     initial_state=x0, initial_std=std, dead_reckoning=tuple(dead), source=source, given=True)
-
-
-def _dp_table(t: TableReader, *, present: bool) -> DPConfig:
-    """The optional [dp] table (closed schema; every problem collected)."""
-    base = DPConfig()
-    if not present:
-        return base
-    source = t.string("source")
-    axes = ("x", "y", "z", "psi")
-    speed_keys = ("x", "y", "z", "psi_deg_s")
-    bw = _per_key(t, "bandwidth", axes, base.bandwidth, positive=True, what="rad/s")
-    zeta = t.number("damping", base.damping, positive=True, hi=10.0, what="relative damping of the closed loop")
-    ratio = t.number("integral_ratio", base.integral_ratio, nonnegative=True, hi=1.0,
-                     what="K_i = ratio * omega_n * K_p; 0 = no integral action")
-    rbw = _per_key(t, "reference_bandwidth", axes, base.reference_bandwidth, positive=True, what="rad/s")
-    rzeta = t.number("reference_damping", base.reference_damping, positive=True, hi=10.0)
-    speed = _per_key(t, "max_speed", speed_keys, base.max_speed / np.array([1, 1, 1, _DEG]),
-                     factors=(1.0, 1.0, 1.0, _DEG), positive=True, what="m/s, or deg/s for psi_deg_s")
-    aw = t.number("anti_windup", base.anti_windup, nonnegative=True, hi=100.0,
-                  what="back-calculation gain relative to omega_n; 0 = off")
-    t.finish()
-    for arr in (bw, rbw, speed):
-        arr.setflags(write=False)
-    return DPConfig(bandwidth=bw, damping=zeta, integral_ratio=ratio, reference_bandwidth=rbw, reference_damping=rzeta,
-                    max_speed=speed, anti_windup=aw, source=source, given=True)
 
 
 def _state_table(t: TableReader, name: str, keys: Mapping[str, tuple[int, float]], *,
@@ -639,51 +537,6 @@ def _lqr_weights(t: TableReader) -> tuple[np.ndarray, np.ndarray, dict[str, np.n
         Q = bryson_diagonal(np.where(np.isfinite(smax) & (smax > 0), smax, np.nan), sw)
         R = bryson_diagonal(np.where(np.isfinite(umax) & (umax > 0), umax, np.nan), uw)
     return Q, R, {"state_max": smax, "input_max": umax, "state_weight": sw, "input_weight": uw}
-
-
-def _mrac_table(t: TableReader, *, present: bool) -> MRACConfig:
-    """The optional [mrac] table (closed schema; every problem collected)."""
-    base = MRACConfig()
-    if not present:
-        return base
-    source = t.string("source")
-    omega = t.number("bandwidth", base.bandwidth, positive=True, hi=100.0, what="omega_m of the reference model in rad/s")
-    zeta = t.number("damping", base.damping, positive=True, hi=10.0, what="zeta_m of the reference model")
-    step = t.number("max_step", base.max_step, positive=True, what="depth step in m the thrusters must manage")
-    lam = t.number("lambda", base.lam, positive=True, what="1/s, in s = e_dot + lambda e")
-    k_s = t.number("k_s", base.k_s, positive=True, what="N s/m, feedback on s")
-    sigma = t.number("sigma", base.sigma, nonnegative=True, what="1/s, sigma-modification; 0 = off")
-    hedge = t.boolean("hedge", base.hedge)
-    gain = dict(base.gain)
-    g = t.table("gain", required=False)
-    for key in MRAC_PARAMETERS:
-        if g.has(key):
-            gain[key] = g.number(key, nonnegative=True, what="adaptation gain; 0 freezes the parameter")
-    g.finish()
-    initial: dict[str, float] = {}
-    it = t.table("initial", required=False)
-    for key in MRAC_PARAMETERS:
-        if it.has(key):
-            initial[key] = it.number(key, positive=key == "M", nonnegative=key in ("D_l", "D_q"),
-                                     what={"M": "kg", "D_l": "N s/m", "D_q": "N s^2/m^2", "F": "N, down"}[key])
-    it.finish()
-    bounds: dict[str, tuple[float, float]] = {}
-    bt = t.table("bounds", required=False)
-    for key in MRAC_PARAMETERS:
-        if bt.has(key):
-            lo, hi = bt.vector(key, 2, what="[lowest, highest]")
-            if np.all(np.isfinite([lo, hi])):
-                floor = 0.0 if key != "F" else -math.inf
-                if not lo < hi:
-                    bt.problem(key, [lo, hi], "[lowest, highest] with lowest < highest")
-                elif lo < floor or (key == "M" and lo <= 0.0):
-                    bt.problem(key, [lo, hi], "a positive lower bound for M, >= 0 for D_l and D_q")
-                else:
-                    bounds[key] = (float(lo), float(hi))
-    bt.finish()
-    t.finish()
-    return MRACConfig(bandwidth=omega, damping=zeta, max_step=step, lam=lam, k_s=k_s, sigma=sigma, hedge=hedge,
-                      gain=gain, initial=initial, bounds=bounds, source=source, given=True)
 
 
 def check_design_config_file(name_or_path: str | Path) -> list[Problem]:

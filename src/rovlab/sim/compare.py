@@ -139,7 +139,7 @@ def compare(data: Mapping[str, Any], file: str, controllers: Sequence[str], seed
         for ctl in controllers:
             prep = prepare(replace(sc, controller=ctl), book=book)
             if refmodel is None:
-                mc = prep.config.mrac
+                mc = prep.config.table("mrac")
                 refmodel = (mc.bandwidth, mc.damping)
             model = prep.design.controller.model
             bounds = (model.lo, model.hi) if hasattr(model, "lo") and hasattr(model, "hi") else None

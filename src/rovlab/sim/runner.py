@@ -573,12 +573,13 @@ def summarise(result: SimResult) -> dict[str, Any]:
     sc = result.scenario
     t = c["time_s"]
     out: dict[str, Any] = {"scenario": sc.name, "seed": sc.seed, "plant": sc.plant}
-    states = ["z", "psi", "w", "r"]
-    est = np.column_stack([c[f"est_{s}"] for s in states])
-    true = np.column_stack([c[f"true_{s}"] for s in states])
-    err = mx.estimation_error(est, true)
-    out["rms_error"] = dict(zip(states, map(float, mx.rms(err))))
-    if sc.plant == "observer":
+    # the depth-and-heading quantities the estimator estimates (every shipped one does; a plugin may not)
+    n = len(t)
+    states = [q for q in ("z", "psi", "w", "r") if f"est_{q}" in c and f"true_{q}" in c]
+    error = {q: mx.estimation_error(np.column_stack([c[f"est_{q}"]]), np.column_stack([c[f"true_{q}"]]),
+                                    angle_columns=(0,) if q == "psi" else ())[:, 0] for q in states}
+    out["rms_error"] = {q: float(mx.rms(error[q])) for q in states}
+    if sc.plant == "observer" and "est_b_w" in c and "est_b_r" in c:
         eb = np.column_stack([c["est_b_w"] - c["true_b_w"], c["est_b_r"] - c["true_b_r"]])
         out["rms_error"].update(dict(zip(("b_w", "b_r"), map(float, mx.rms(eb)))))
     # steps of the reference schedule, per axis, judged on the true state
@@ -588,10 +589,10 @@ def summarise(result: SimResult) -> dict[str, Any]:
     for i, t0 in enumerate(sc.reference_times):
         t1 = times[i + 1]
         z1, psi1 = float(sc.reference_z[i]), float(sc.reference_psi[i])
-        if abs(z1 - prev_z) > 1e-12:
+        if abs(z1 - prev_z) > 1e-12 and "true_z" in c:
             r = mx.step_response(t, c["true_z"], t0, prev_z, z1, t1, band=0.02, min_band=0.005)
             steps.append({"axis": "z", **r})
-        if abs(mx.wrap(psi1 - prev_psi)) > 1e-12:
+        if abs(mx.wrap(psi1 - prev_psi)) > 1e-12 and "true_psi" in c:
             r = mx.step_response(t, c["true_psi"], t0, prev_psi, psi1, t1, band=0.02, min_band=math.radians(0.5),
                                  angle=True)
             steps.append({"axis": "psi", **r})
@@ -613,7 +614,7 @@ def summarise(result: SimResult) -> dict[str, Any]:
         w = (t >= d.start_s) & (t < d.end_s)
         if not w.any():
             continue
-        e_psi = err[:, 1]
+        e_psi = error.get("psi", np.full(n, np.nan))
         i0 = int(np.argmax(w))
         i1 = int(len(w) - 1 - np.argmax(w[::-1]))
         drops.append({
@@ -622,7 +623,7 @@ def summarise(result: SimResult) -> dict[str, Any]:
             "heading_error_max_rad": float(np.max(np.abs(e_psi[w]))),
             "heading_error_rms_before": rec["before"].get("psi"),
             "depth_error_rms_before": rec["before"].get("z"),
-            "depth_error_rms_during": float(mx.rms(err[w, 0])),
+            "depth_error_rms_during": float(mx.rms(error["z"][w])) if "z" in error else None,
         })
     out["dropouts"] = drops
     events = mx.sensor_loss_events(coded, dropouts=result.meta["dropouts"])

@@ -16,6 +16,7 @@ picks the uncached copy for components defined outside rovlab, as rovlab.sim.loo
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -29,6 +30,7 @@ from rovlab.core.components import (
     plant_advance,
     plant_truth,
 )
+from rovlab.estimation.layout import EVENT_NONE, REP_EVENT
 from rovlab.models.sensors import sample_sensors
 from rovlab.models.thrusters import bank_force_into
 from rovlab.sim.actuators import actuate
@@ -57,6 +59,10 @@ class StepOut(NamedTuple):
 def estimate(t, est, nav_of, y, present, rep, nav, x_out, P_out):
     """Correct the estimator with the samples y (NaN where ``present`` is False); the corrected
     estimate and covariance into x_out / P_out, and into ``nav`` in the TRUTH layout."""
+    for j in range(rep.shape[0]):  # what an estimator does not report on a channel: no event
+        rep[j, REP_EVENT] = EVENT_NONE
+        for col in range(1, rep.shape[1]):
+            rep[j, col] = math.nan
     estimator_correct(est, t, y, present, rep)
     n = est.x.shape[0]
     for i in range(n):

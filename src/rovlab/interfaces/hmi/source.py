@@ -152,22 +152,25 @@ def design_summary(design: Any, *, truth: Vehicle, controller: str) -> dict[str,
     them: shared by the simulation and the vehicle bridges' sources."""
     fm = design.estimator.model
     v, config = design.vehicle, design.config
+    M = np.diag(mass_matrix(v))
     if hasattr(fm, "T_w"):  # the depth-and-heading filter
         model = {**config.model_values(v), "T_w": fm.T_w, "T_r": fm.T_r, "M_w": fm.params.M_w,
                  "M_r": fm.params.M_r}
         W, Q = np.diag(fm.W)[2:], np.diag(fm.Q)
-    else:  # the 4-DOF EKF: its heave and yaw entries in the same shape (W: Z, N, b_Z, b_N)
-        M = np.diag(mass_matrix(v))
+    elif hasattr(fm, "inv_T"):  # the 4-DOF EKF: its heave and yaw entries in the same shape (W: Z, N, b_Z, b_N)
         model = {**config.model_values(v), "T_w": float(1.0 / fm.inv_T[2]), "T_r": float(1.0 / fm.inv_T[3]),
                  "M_w": float(M[2]), "M_r": float(M[3])}
         W, Q = fm.W[[2, 3, 6, 7]], np.diag(fm.Q0)
+    else:  # another estimator (a plugin's): the vehicle's model, no noise model to show
+        model = {**config.model_values(v), "M_w": float(M[2]), "M_r": float(M[3])}
+        W, Q = np.zeros(0), np.zeros(0)
     ctl = design.controller.model
     out: dict[str, Any] = {
         "model": model,
         "vehicle": _vehicle_summary(v),
         "truth": _vehicle_summary(truth),
         "W": _floats(W),
-        "R": {c.name: c.variance for c in fm.channels},
+        "R": {c.name: c.variance for c in design.estimator.channels},
         "Q_diag": _floats(Q),
         "lqr_Q": _floats(config.lqr_Q),
         "lqr_R": _floats(config.lqr_R),

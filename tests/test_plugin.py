@@ -1,0 +1,88 @@
+"""Components from outside rovlab (issue 26): examples/plugin, an installable package with a
+complementary filter and a PD law, found through its entry points ("rovlab.estimators",
+"rovlab.controllers"). `make test` installs it (pip install -e examples/plugin); without it these
+tests skip with the reason.
+
+What a contributor gets without touching rovlab: the design file's [complementary] and [pd]
+tables read and checked by rovlab's loader, a scenario, a Monte Carlo and the HMI's session.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+plugin = pytest.importorskip("rovlab_example_plugin",
+                             reason="the plugin example is not installed (pip install -e examples/plugin; make test does)")
+
+from rovlab.core.components import component, component_names  # noqa: E402
+from rovlab.params.design import design_config_from_dict, load_design_config  # noqa: E402
+from rovlab.params.validate import ConfigError, read_toml  # noqa: E402
+
+SCENARIO = plugin.EXAMPLES / "pd-depth-step.toml"
+CONFIG = plugin.EXAMPLES / "complementary-pd.toml"
+
+
+def test_its_components_are_found_through_entry_points_without_a_line_of_rovlab():
+    assert "complementary" in component_names("estimator") and "pd" in component_names("controller")
+    assert component("estimator", "complementary").measurable == ("z", "psi", "w", "r")
+    assert component("controller", "pd").build.__module__ == "rovlab_example_plugin.pd"
+
+
+def test_its_tables_are_read_by_the_loader_with_the_loaders_errors():
+    cfg = load_design_config(CONFIG)
+    assert cfg.estimator == "complementary" and cfg.controller == "pd"
+    assert cfg.table("pd").kp_z == 40.0 and cfg.table("complementary").k_vel == 1.0
+    assert "pd" in cfg.sources and "complementary" in cfg.sources
+    data = read_toml(CONFIG)
+    data["pd"] = {**data["pd"], "kp_z": -1.0, "gain_of_my_dreams": 3.0}
+    with pytest.raises(ConfigError) as err:
+        design_config_from_dict(data, file="mine.toml")
+    text = str(err.value)
+    assert "mine.toml" in text and "pd.kp_z" in text and "-1" in text  # file, key, value, expected
+    assert "pd.gain_of_my_dreams" in text and "unknown keys are errors" in text
+    # a configuration without the tables gets the components' defaults
+    del data["pd"], data["complementary"]
+    cfg = design_config_from_dict(data, file="mine.toml")
+    assert cfg.table("pd") == type(cfg.table("pd"))()
+
+
+def test_a_scenario_runs_with_them_and_holds_the_depth(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "rovlab.interfaces.cli", "simulate", str(SCENARIO), "--out",
+                          str(tmp_path / "run"), "--no-figures"], capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["rms_error"]["z"] < 0.05 and metrics["rms_error"]["psi"] < np.radians(3.0)
+    from rovlab.io.logs import read_log
+
+    log = read_log(tmp_path / "run" / "timeseries.csv")
+    assert abs(float(np.mean(log["true_z"][-100:])) - 0.70) < 0.08  # the 0.70 m step is held by the PD law
+    assert abs(float(np.mean(log["true_psi"][-50:]))) < np.radians(3.0)  # and the heading step to 0 deg
+    assert set(log.text["status_z_qualisys"]) == {"ok"}  # rovlab's channel bookkeeping, kept by the filter
+
+
+def test_a_monte_carlo_of_40_runs_with_them(tmp_path):
+    from rovlab.sim.montecarlo import run_many, summarise_runs
+    from rovlab.sim.scenario import load_scenario_data
+
+    data, file = load_scenario_data(str(SCENARIO))
+    runs = run_many(data, file, list(range(40)), workers=2)
+    summary = summarise_runs(runs)
+    assert summary["runs"] == 40 and summary["metrics"]["rms_error.z"]["count"] == 40
+    assert summary["metrics"]["rms_error.z"]["max"] < 0.05
+
+
+def test_the_hmi_session_runs_them():
+    pytest.importorskip("aiohttp", reason="the HMI needs the 'hmi' extra (aiohttp)")
+    from rovlab.interfaces.hmi.session import Session
+
+    session = Session.simulation(str(SCENARIO), running=False)
+    msgs = session.advance(20)
+    estimates = [payload for topic, _, payload in msgs if topic == "/rovlab/estimate"]
+    assert len(estimates) == 20 and all(np.isfinite(float(e["state"]["z"])) for e in estimates)
+    summary = session.source.loop_summary()
+    assert summary["controller"] == "pd" and set(summary["R"]) == {"qualisys.z", "pressure.z", "qualisys.psi"}
