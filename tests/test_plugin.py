@@ -86,3 +86,16 @@ def test_the_hmi_session_runs_them():
     assert len(estimates) == 20 and all(np.isfinite(float(e["state"]["z"])) for e in estimates)
     summary = session.source.loop_summary()
     assert summary["controller"] == "pd" and set(summary["R"]) == {"qualisys.z", "pressure.z", "qualisys.psi"}
+
+
+def test_rovlab_filter_replays_a_log_with_the_plugins_estimator(tmp_path):
+    from rovlab.interfaces.cli import main
+    from rovlab.io.logs import read_log
+
+    run = tmp_path / "run"
+    assert main(["simulate", str(SCENARIO), "--out", str(run), "--no-figures"]) == 0
+    est = tmp_path / "est.csv"
+    assert main(["filter", str(run / "timeseries.csv"), "--config", str(CONFIG), "--out", str(est)]) == 0
+    a, b = read_log(run / "timeseries.csv"), read_log(est)
+    for s in ("z", "psi", "w", "r"):  # the in-loop estimates, to the log's 10 significant digits
+        np.testing.assert_allclose(b[f"est_{s}"], a[f"est_{s}"], rtol=1e-7, atol=1e-8, err_msg=s)

@@ -52,7 +52,7 @@ KERNEL_MODULES = (
     "allocation/kernels.py", "allocation/solvers.py",
     "control/dp.py", "control/lqg.py", "control/mrac.py",
     "core/angles.py", "core/components.py",
-    "estimation/ekf.py", "estimation/fusion.py", "estimation/kalman.py", "estimation/kf.py",
+    "estimation/ekf.py", "estimation/fusion.py", "estimation/kalman.py", "estimation/kf.py", "estimation/offline.py",
     "io/csvtext.py",
     "models/kinetics.py", "models/sensors.py", "models/thruster_kernels.py", "models/thrusters.py",
     "sim/actuators.py", "sim/loop.py", "sim/plant.py", "sim/step.py",

@@ -66,6 +66,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.lib.stride_tricks import as_strided
@@ -592,7 +593,7 @@ class FilterRun:
     innovation: np.ndarray  # N x m (prior innovation; NaN without a usable sample)
     innovation_variance: np.ndarray  # N x m
     flags: np.ndarray  # N, int8
-    belief: Belief  # after the last sample
+    belief: Any  # after the last sample: a Belief (DepthHeadingFilter), the component (rovlab.estimation.offline)
     states: tuple[str, ...]
     channels: tuple[str, ...]
 
@@ -860,7 +861,7 @@ class StreamingFilter:
     * a non-finite input repeats the previous finite one (zero-order hold), across chunks.
     """
 
-    def __init__(self, filt: DepthHeadingFilter, *, max_gap_steps: int = MAX_GAP_STEPS,
+    def __init__(self, filt: Any, *, max_gap_steps: int = MAX_GAP_STEPS,
                  tolerance: float = 0.25) -> None:
         self.filt = filt
         self.h = filt.model.h

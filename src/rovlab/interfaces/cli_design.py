@@ -36,6 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                  "--record` recording); or a MAVLink dive: a .tlog, or an .mcap recorded by "
                                  "rovlab mavlink (needs rovlab[mavlink]; docs/mavlink.md)")
     fil.add_argument("--out", required=True, help="output CSV (- for standard output)")
+    fil.add_argument("--estimator", default=None, metavar="NAME",
+                     help="the estimator to replay the log with: any registered one (kf, ekf, a plugin's; "
+                          "default: the configuration's estimator)")
     fil.add_argument("--max-gap-steps", type=int, default=10_000, metavar="N",
                      help="a gap of more than N filter samples restarts the filter from its prior instead of "
                           "predicting through it (default 10000)")
@@ -162,10 +165,34 @@ def _cmd_filter(args: argparse.Namespace) -> int:
 
     if args.max_gap_steps < 1:
         raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
-    vehicle, config, model = _load(args)
-    _check_initial(config, model)
+    filt, inputs, vehicle, config = _offline_filter(args)
     with tempfile.TemporaryDirectory(prefix="rovlab-filter-") as tmp:
-        return _filter(args, vehicle, config, model, _as_csv(args.log, vehicle, model, Path(tmp)))
+        return _filter(args, vehicle, config, filt, inputs, _as_csv(args.log, vehicle, filt.model, Path(tmp)))
+
+
+def _offline_filter(args: argparse.Namespace):
+    """(filter, its input columns, vehicle, configuration) for ``rovlab filter``: the
+    depth-and-heading filter's own replay for estimator kf (its kernels, its inputs Z and N), any
+    other registered estimator through its slots (rovlab.estimation.offline; the wrench X, Y, Z, N)."""
+    from rovlab.core.components import component, unknown_component
+    from rovlab.estimation.kalman import DepthHeadingFilter
+    from rovlab.estimation.model import build_filter_model
+    from rovlab.estimation.offline import WRENCH_COLUMNS, ComponentFilter
+    from rovlab.params.design import load_design_config
+    from rovlab.params.vehicle import load_vehicle
+
+    vehicle = load_vehicle(args.vehicle)
+    config = load_design_config(args.config)
+    name = args.estimator or config.estimator
+    if name == "kf":
+        model = build_filter_model(vehicle, config)
+        _check_initial(config, model)
+        return DepthHeadingFilter(model), INPUT_COLUMNS, vehicle, config
+    info = component("estimator", name)
+    if info is None:
+        where = "--estimator" if args.estimator else f"{config.file}: estimator"
+        raise ConfigError([Problem(where, "estimator", name, unknown_component("estimator", name))], "command line")
+    return ComponentFilter(info.build(vehicle, config)), WRENCH_COLUMNS, vehicle, config
 
 
 def _as_csv(log: str, vehicle, model, folder: Path) -> str:
@@ -213,26 +240,30 @@ def _mavlink_as_csv(log: str, vehicle, model, folder: Path) -> str:
     return str(out)
 
 
-def _filter(args: argparse.Namespace, vehicle, config, model, log: str) -> int:
+def _filter(args: argparse.Namespace, vehicle, config, filt, inputs: tuple[str, ...], log: str) -> int:
     from rovlab.io.logs import LogStream
 
+    model = filt.model
     columns = [c.column for c in model.channels]
     # a simulation's timeseries.csv names the samples meas_<quantity>_<sensor>: read those as they are
     header = set(LogStream(log, required=("time_s",)).header)
     source = {c: f"meas_{c}" if c not in header and f"meas_{c}" in header else c for c in columns}
-    stream = LogStream(log, required=("time_s",) + INPUT_COLUMNS + tuple(source.values()))
+    # tau_Z and tau_N are required; the surge and sway inputs of a 4-DOF estimator are 0 when the log
+    # has none (a depth-and-heading controller's log commands neither)
+    absent = tuple(c for c in inputs if c not in header and c not in INPUT_COLUMNS)
+    stream = LogStream(log, required=("time_s",) + tuple(c for c in inputs if c not in absent) + tuple(source.values()))
     chunks = iter(stream)  # with pyarrow a reader thread parses ahead from here (while the kernels load)
     try:
-        return _filter_chunks(args, vehicle, config, model, stream, chunks, columns, source)
+        return _filter_chunks(args, vehicle, config, filt, inputs, absent, stream, chunks, columns, source)
     finally:
         close = getattr(chunks, "close", None)
         if close is not None:
             close()
 
 
-def _filter_chunks(args: argparse.Namespace, vehicle, config, model, stream, chunks, columns: list[str],
-                   source: dict[str, str]) -> int:
-    from rovlab.estimation.kalman import DepthHeadingFilter, IntervalError, StreamingFilter
+def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tuple[str, ...], absent: tuple[str, ...],
+                   stream, chunks, columns: list[str], source: dict[str, str]) -> int:
+    from rovlab.estimation.kalman import IntervalError, StreamingFilter
     from rovlab.estimation.layout import (
         EVENT_NONFINITE,
         EVENT_REJECTED,
@@ -246,7 +277,7 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, model, stream, chu
     from rovlab.io.logs import ChunkWriter
     from rovlab.io.tables import write_sidecar
 
-    filt = DepthHeadingFilter(model)
+    model = filt.model
     runner = StreamingFilter(filt, max_gap_steps=args.max_gap_steps)
     m = len(columns)
     # status codes -> labels ('ok', 'lost-timeout', ...): code = 8 status + reason
@@ -256,8 +287,9 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, model, stream, chu
     # the column names of a simulation's timeseries.csv (est_*, var_*, status_*): one scheme everywhere
     names = ["time_s", *(f"est_{s}" for s in model.states), *(f"var_{s}" for s in model.states),
              *(f"status_{c}" for c in columns)]
+    estimator = args.estimator or config.estimator
     comments = [f"rovlab filter {args.log}: vehicle {vehicle.name}, configuration {config.name}, "
-                f"h = {model.h:g} s", "units: SI (m, rad, m/s, rad/s, N, N m); var_* are the variances"]
+                f"estimator {estimator}, h = {model.h:g} s", "units: SI (m, rad, m/s, rad/s, N, N m); var_* are the variances"]
     samples = np.zeros(m, dtype=np.int64)
     used = np.zeros(m, dtype=np.int64)
     rejected = np.zeros(m, dtype=np.int64)
@@ -287,7 +319,8 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, model, stream, chu
         writer = ChunkWriter(args.out, names, significant=10, exact=("time_s",))
         if args.out != "-":
             write_sidecar(args.out, {"what": comments[0], "units": comments[1], "vehicle": vehicle.name,
-                                     "configuration": config.name, "sample_time_s": model.h, "log": str(args.log)})
+                                     "configuration": config.name, "estimator": estimator, "sample_time_s": model.h,
+                                     "log": str(args.log)})
     except OSError as exc:
         raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     with writer:
@@ -299,7 +332,7 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, model, stream, chu
                 if math.isnan(t_first):
                     t_first = float(t[0])
                 t_last = float(t[-1])
-                u = np.column_stack([chunk.data[c] for c in INPUT_COLUMNS])
+                u = np.column_stack([np.zeros(t.size) if c in absent else chunk.data[c] for c in inputs])
                 y = np.column_stack([chunk.data[source[c]] for c in columns])
                 samples += np.count_nonzero(~np.isnan(y), axis=0)
                 dt = np.diff(np.concatenate([[t_prev], t]) if math.isfinite(t_prev) else t)
@@ -324,7 +357,10 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, model, stream, chu
     report = sys.stderr if args.out == "-" else sys.stdout
     span = t_last - t_first if n_rows > 1 else 0.0
     print(f"filtered {n_rows} samples ({span:g} s) of {args.log} with {vehicle.name}/{config.name}"
+          + (f", estimator {estimator}" if estimator != "kf" else "")
           + ("" if args.out == "-" else f" -> {args.out}"), file=report)
+    if absent:
+        print(f"  {', '.join(absent)}: not in the log, taken as 0", file=report)
     if gaps:
         print(f"  {gaps} gap(s) in the log bridged by prediction", file=report)
     if runner.restarts:
