@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 import signal
 import threading
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -28,7 +27,7 @@ from sensor_msgs.msg import FluidPressure, Imu
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from rovlab.interfaces.node import ros_common as rc
-from rovlab.interfaces.node.core import NodeCore, NodeOutput
+from rovlab.interfaces.node.core import NodeCore
 
 
 def _stamp(seconds: float) -> Any:
@@ -42,112 +41,55 @@ def _seconds(stamp: Any, now: float) -> float:
     return rc.stamp_seconds(stamp.secs, stamp.nsecs)
 
 
-class _Throttle:
-    def __init__(self, log: Callable[[str], None], period: float = 2.0) -> None:
-        self.log, self.period = log, period
-        self.last: dict[str, float] = {}
-        self.lock = threading.Lock()
-
-    def __call__(self, key: str, message: str) -> None:
-        now = time.monotonic()
-        with self.lock:
-            if now - self.last.get(key, -1e9) < self.period:
-                return
-            self.last[key] = now
-        self.log(message)
-
-
 def _now() -> float:
     return rospy.get_rostime().to_sec()
 
 
-class VehicleNode1:
+MSGS = rc.Messages(FluidPressure=FluidPressure, PoseStamped=PoseStamped, Imu=Imu, Odometry=Odometry,
+                   WrenchStamped=WrenchStamped, Float64MultiArray=Float64MultiArray,
+                   MultiArrayDimension=MultiArrayDimension, DiagnosticArray=DiagnosticArray,
+                   DiagnosticStatus=DiagnosticStatus, KeyValue=KeyValue)
+
+
+class _Ros1:
+    """Stamps and the clock on ROS 1 (rovlab.interfaces.node.ros_common.RosAdapter)."""
+
+    msgs = MSGS
+
+    def now(self) -> float:
+        return _now()
+
+    def set_stamp(self, header: Any, seconds: float) -> None:
+        header.stamp = _stamp(seconds)
+
+    def stamp_seconds(self, stamp: Any, now: float) -> float:
+        return _seconds(stamp, now)
+
+
+class VehicleNode1(_Ros1, rc.VehicleAdapter):
     """NodeCore on ROS 1 topics."""
 
     def __init__(self, core: NodeCore, table: rc.ParameterTable, *, mocap_covariance: bool = False,
                  recorder: Any = None) -> None:
-        self.core, self.table, self.recorder = core, table, recorder
-        self.warn = _Throttle(rospy.logwarn)
-        v = core.vehicle
-        self.rho, self.g = v.water_density, v.gravity
-        self.surface_pa = rc.SURFACE_PRESSURE_PA
-        self.sensor = {k: core.sensor_of_kind(k) for k in ("pressure", "motion_capture", "imu")}
+        self.setup(core, table, recorder)
+        self.warn = rc.Throttle(rospy.logwarn)
+        self.info = rospy.loginfo
         self.pub_odom = rospy.Publisher(rc.TOPICS["odometry"], Odometry, queue_size=10)
         self.pub_wrench = rospy.Publisher(rc.TOPICS["wrench"], WrenchStamped, queue_size=10)
         self.pub_pwm = rospy.Publisher(rc.TOPICS["pwm"], Float64MultiArray, queue_size=10)
         self.pub_diag = rospy.Publisher(rc.TOPICS["diagnostics"], DiagnosticArray, queue_size=10)
-        rospy.Subscriber(rc.TOPICS["pressure"], FluidPressure, self._guard("pressure", self._on_pressure),
+        rospy.Subscriber(rc.TOPICS["pressure"], FluidPressure, self.guard("pressure", self.on_pressure),
                          queue_size=10, tcp_nodelay=True)
         rospy.Subscriber(rc.TOPICS["mocap"], PoseWithCovarianceStamped if mocap_covariance else PoseStamped,
-                         self._guard("mocap/pose", self._on_mocap), queue_size=10, tcp_nodelay=True)
-        rospy.Subscriber(rc.TOPICS["imu"], Imu, self._guard("imu", self._on_imu), queue_size=10, tcp_nodelay=True)
-        rospy.Subscriber(rc.TOPICS["setpoint"], PoseStamped, self._guard("setpoint", self._on_setpoint), queue_size=10)
+                         self.guard("mocap/pose", self.on_mocap), queue_size=10, tcp_nodelay=True)
+        rospy.Subscriber(rc.TOPICS["imu"], Imu, self.guard("imu", self.on_imu), queue_size=10, tcp_nodelay=True)
+        rospy.Subscriber(rc.TOPICS["setpoint"], PoseStamped, self.guard("setpoint", self.on_setpoint), queue_size=10)
         self._server: dict[str, Any] = {}
         for name, value in {"surface_pressure_pa": self.surface_pa, **table.values}.items():
             rospy.set_param("~" + name.replace(".", "/"), value)
             self._server[name] = value
-        rospy.Timer(rospy.Duration(core.h / 5.0), self._guard("timer", lambda event: self._run(_now())))
-        rospy.Timer(rospy.Duration(1.0), self._guard("parameters", lambda event: self.poll_parameters()))
-
-    def _guard(self, where: str, fn: Callable[[Any], None]) -> Callable[[Any], None]:
-        def call(arg: Any) -> None:
-            try:
-                fn(arg)
-            except rc.MessageError as exc:
-                self.warn(where, f"{rc.TOPICS.get(where, where)}: message ignored: {exc}")
-            except Exception as exc:  # noqa: BLE001 - nothing from outside may stop the node
-                self.warn(where + "!", f"{where}: {type(exc).__name__}: {exc} (the node keeps running)")
-        return call
-
-    def _push(self, kind: str, samples: dict[str, float], stamp: float, topic: str) -> None:
-        for result in rc.push_samples(self.core, self.sensor[kind], samples, stamp):
-            if result == "invalid":
-                self.warn(topic + result, f"{topic}: {self.core.last_problem}")
-        if self.recorder is not None:
-            self.recorder.sample(topic, stamp, samples)
-        self._run(_now())
-
-    def _on_pressure(self, msg: Any) -> None:
-        depth = rc.depth_from_pressure(msg.fluid_pressure, rho=self.rho, g=self.g, surface_pa=self.surface_pa)
-        self._push("pressure", {"z": depth}, _seconds(msg.header.stamp, _now()), "pressure")
-
-    def _on_mocap(self, msg: Any) -> None:
-        pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
-        self._push("motion_capture", rc.pose_samples(pose, "mocap/pose.pose"), _seconds(msg.header.stamp, _now()),
-                   "mocap/pose")
-
-    def _on_imu(self, msg: Any) -> None:
-        self._push("imu", rc.imu_samples(msg), _seconds(msg.header.stamp, _now()), "imu")
-
-    def _on_setpoint(self, msg: Any) -> None:
-        s = rc.pose_samples(msg.pose, "setpoint.pose")
-        if s["z"] < 0.0:
-            raise rc.MessageError(f"setpoint depth {s['z']:g} m (ENU z = {-s['z']:g}) is above the surface")
-        engaged = self.core.engaged
-        self.core.set_reference(z=s["z"], psi=s["psi"])
-        if not engaged:
-            rospy.loginfo(f"first set-point: depth {s['z']:g} m, heading {s['psi']:g} rad; controller engaged")
-
-    def _run(self, now: float) -> None:
-        outs = self.core.tick(now)
-        if outs:
-            self.publish(outs[-1])
-
-    def publish(self, out: NodeOutput) -> None:
-        odom = rc.fill_odometry(Odometry(), rc.odometry_content(out))
-        odom.header.stamp = _stamp(out.stamp)
-        self.pub_odom.publish(odom)
-        w = rc.fill_wrench(WrenchStamped(), out.tau)
-        w.header.stamp = _stamp(out.stamp)
-        self.pub_wrench.publish(w)
-        self.pub_pwm.publish(rc.fill_pwm(Float64MultiArray(), MultiArrayDimension, out))
-        if out.k % max(1, int(round(1.0 / self.core.h))) == 0:
-            d = rc.fill_diagnostics(DiagnosticArray(), DiagnosticStatus, KeyValue, rc.diagnostics_content(
-                out, self.core.counters, gains=getattr(self.core.design.controller.model, "K", None)))
-            d.header.stamp = _stamp(out.stamp)
-            self.pub_diag.publish(d)
-        if self.recorder is not None:
-            self.recorder.output(out)
+        rospy.Timer(rospy.Duration(core.h / 5.0), self.guard("timer", lambda event: self.run(_now())))
+        rospy.Timer(rospy.Duration(1.0), self.guard("parameters", lambda event: self.poll_parameters()))
 
     def poll_parameters(self) -> None:
         """Apply what changed on the parameter server (see the module)."""
@@ -223,33 +165,24 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
     return _spin(recorder.close if recorder is not None else None)
 
 
-class SimNode1:
+class SimNode1(_Ros1, rc.SimAdapter):
     """A SimulatedVehicle on ROS 1 topics, paced by a rospy timer."""
 
     def __init__(self, sim: Any, *, setpoints: bool = True, wait: bool = True) -> None:
-        self.sim = sim
+        self.setup(sim)
         self.waiting = wait
-        self.warn = _Throttle(rospy.logwarn)
-        truth = sim.prep.truth
-        self.rho, self.g = truth.water_density, truth.gravity
+        self.warn = rc.Throttle(rospy.logwarn)
+        self.info = rospy.loginfo
         self.pub_p = rospy.Publisher(rc.TOPICS["pressure"], FluidPressure, queue_size=10, tcp_nodelay=True)
         self.pub_m = rospy.Publisher(rc.TOPICS["mocap"], PoseStamped, queue_size=10, tcp_nodelay=True)
         self.pub_i = rospy.Publisher(rc.TOPICS["imu"], Imu, queue_size=10, tcp_nodelay=True)
         self.pub_t = rospy.Publisher(rc.TOPICS["truth"], Odometry, queue_size=10)
         self.pub_s = rospy.Publisher(rc.TOPICS["setpoint"], PoseStamped, queue_size=10) if setpoints else None
-        self.sub = rospy.Subscriber(rc.TOPICS["pwm"], Float64MultiArray, self._on_pwm, queue_size=10, tcp_nodelay=True)
-        self.last_ref: tuple[float, float] | None = None
-        self.last_ref_time = -1e9
+        self.sub = rospy.Subscriber(rc.TOPICS["pwm"], Float64MultiArray, self.set_pwm, queue_size=10, tcp_nodelay=True)
         self.lock = threading.Lock()
         self.t0: float | None = None
         self.ready_at: float | None = None
         rospy.Timer(rospy.Duration(sim.h / 2.0), self._on_timer)
-
-    def _on_pwm(self, msg: Any) -> None:
-        try:
-            self.sim.set_pwm(list(msg.data))
-        except ValueError as exc:
-            self.warn("pwm", f"thrusters/pwm_us ignored: {exc}")
 
     def _on_timer(self, event: Any) -> None:
         with self.lock:
@@ -276,57 +209,9 @@ class SimNode1:
         due = int((now - self.t0) / self.sim.h + 1e-9) + 1 - self.sim.k  # made up when held up (see ros2.py)
         for _ in range(min(max(due, 0), 50)):
             s = self.sim.step()
-            self._publish_step(s, self.t0 + s.t)
+            self.publish_step(s, self.t0 + s.t)
         if due > 50:
             self.t0 = now - (self.sim.k - 1) * self.sim.h
-
-    def _publish_step(self, s: Any, now: float) -> None:
-        by_sensor: dict[str, dict[str, float]] = {}
-        for sensor, quantity, value in s.samples:
-            by_sensor.setdefault(sensor, {})[quantity] = value
-        for sensor, values in by_sensor.items():
-            kind = self.sim.sensor_kind(sensor)
-            if kind == "pressure" and "z" in values:
-                m = FluidPressure()
-                m.header.stamp = _stamp(now)
-                m.header.frame_id = sensor
-                m.fluid_pressure = rc.pressure_from_depth(values["z"], rho=self.rho, g=self.g)
-                self.pub_p.publish(m)
-            elif kind == "motion_capture":
-                pm = PoseStamped()
-                pm.header.stamp = _stamp(now)
-                pm.header.frame_id = rc.WORLD_FRAME
-                c = rc.odometry_content(nav={"x": s.truth["x"], "y": s.truth["y"], "z": values.get("z", s.truth["z"]),
-                                             "psi": values.get("psi", s.truth["psi"])})
-                p, q = pm.pose.position, pm.pose.orientation
-                p.x, p.y, p.z = c["position"]
-                q.x, q.y, q.z, q.w = c["orientation"]
-                self.pub_m.publish(pm)
-            elif kind == "imu":
-                im = Imu()
-                im.header.stamp = _stamp(now)
-                im.header.frame_id = rc.BODY_FRAME
-                c = rc.odometry_content(nav={"psi": values.get("psi", 0.0), "r": values.get("r", 0.0)})
-                if "psi" in values:
-                    q = im.orientation
-                    q.x, q.y, q.z, q.w = c["orientation"]
-                else:
-                    im.orientation_covariance = [-1.0] + [0.0] * 8
-                im.angular_velocity.z = c["angular"][2]
-                self.pub_i.publish(im)
-        t = rc.fill_odometry(Odometry(), rc.odometry_content(nav=s.truth))
-        t.header.stamp = _stamp(now)
-        self.pub_t.publish(t)
-        if self.pub_s is not None and (s.reference != self.last_ref or now - self.last_ref_time > 1.0):
-            sp = PoseStamped()
-            sp.header.stamp = _stamp(now)
-            sp.header.frame_id = rc.WORLD_FRAME
-            c = rc.odometry_content(nav={"z": s.reference[0], "psi": s.reference[1]})
-            sp.pose.position.z = c["position"][2]
-            q = sp.pose.orientation
-            q.x, q.y, q.z, q.w = c["orientation"]
-            self.pub_s.publish(sp)
-            self.last_ref, self.last_ref_time = s.reference, now
 
 
 def run_sim(*, vehicle: str | None, scenario: str, namespace: str = "", setpoints: bool = True,

@@ -17,7 +17,6 @@ from __future__ import annotations
 import json
 import math
 import signal
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -57,43 +56,44 @@ def _seconds(stamp: Any, now: float) -> float:
     return rc.stamp_seconds(stamp.sec, stamp.nanosec)
 
 
-class _Throttle:
-    """Log a repeated problem at most once per ``period`` seconds (with the count in between)."""
-
-    def __init__(self, log: Callable[[str], None], period: float = 2.0) -> None:
-        self.log, self.period = log, period
-        self.last: dict[str, float] = {}
-        self.count: dict[str, int] = {}
-
-    def __call__(self, key: str, message: str) -> None:
-        now = time.monotonic()
-        self.count[key] = self.count.get(key, 0) + 1
-        if now - self.last.get(key, -1e9) >= self.period:
-            n = self.count.pop(key)
-            self.last[key] = now
-            self.log(message + (f" ({n} times since the last report)" if n > 1 else ""))
+MSGS = rc.Messages(FluidPressure=FluidPressure, PoseStamped=PoseStamped, Imu=Imu, Odometry=Odometry,
+                   WrenchStamped=WrenchStamped, Float64MultiArray=Float64MultiArray,
+                   MultiArrayDimension=MultiArrayDimension, DiagnosticArray=DiagnosticArray,
+                   DiagnosticStatus=DiagnosticStatus, KeyValue=KeyValue)
 
 
-class VehicleNode:
+class _Ros2:
+    """Stamps and the clock on ROS 2 (rovlab.interfaces.node.ros_common.RosAdapter)."""
+
+    msgs = MSGS
+    node: Node
+
+    def now(self) -> float:
+        return self.node.get_clock().now().nanoseconds * 1e-9
+
+    def set_stamp(self, header: Any, seconds: float) -> None:
+        _stamp(header.stamp, seconds)
+
+    def stamp_seconds(self, stamp: Any, now: float) -> float:
+        return _seconds(stamp, now)
+
+
+class VehicleNode(_Ros2, rc.VehicleAdapter):
     """NodeCore on ROS 2 topics (see the module)."""
 
     def __init__(self, core: NodeCore, table: rc.ParameterTable, *, namespace: str = "", mocap_covariance: bool = False,
                  recorder: Any = None, node_name: str = "rovlab_node") -> None:
-        self.core, self.table, self.recorder = core, table, recorder
+        self.setup(core, table, recorder)
         self.node = node = Node(node_name, namespace=namespace)
         log = node.get_logger()
-        self.warn = _Throttle(log.warning)
+        self.warn = rc.Throttle(log.warning)
         self.info = log.info
-        v = core.vehicle
-        self.rho, self.g = v.water_density, v.gravity
-        self.surface_pa = rc.SURFACE_PRESSURE_PA
-        self.sensor = {k: core.sensor_of_kind(k) for k in ("pressure", "motion_capture", "imu")}
-        node.create_subscription(FluidPressure, rc.TOPICS["pressure"], self._guard("pressure", self._on_pressure),
+        node.create_subscription(FluidPressure, rc.TOPICS["pressure"], self.guard("pressure", self.on_pressure),
                                  qos_profile_sensor_data)
         node.create_subscription(PoseWithCovarianceStamped if mocap_covariance else PoseStamped, rc.TOPICS["mocap"],
-                                 self._guard("mocap/pose", self._on_mocap), qos_profile_sensor_data)
-        node.create_subscription(Imu, rc.TOPICS["imu"], self._guard("imu", self._on_imu), qos_profile_sensor_data)
-        node.create_subscription(PoseStamped, rc.TOPICS["setpoint"], self._guard("setpoint", self._on_setpoint), RELIABLE)
+                                 self.guard("mocap/pose", self.on_mocap), qos_profile_sensor_data)
+        node.create_subscription(Imu, rc.TOPICS["imu"], self.guard("imu", self.on_imu), qos_profile_sensor_data)
+        node.create_subscription(PoseStamped, rc.TOPICS["setpoint"], self.guard("setpoint", self.on_setpoint), RELIABLE)
         self.pub_odom = node.create_publisher(Odometry, rc.TOPICS["odometry"], RELIABLE)
         self.pub_wrench = node.create_publisher(WrenchStamped, rc.TOPICS["wrench"], RELIABLE)
         self.pub_pwm = node.create_publisher(Float64MultiArray, rc.TOPICS["pwm"], RELIABLE)
@@ -101,80 +101,11 @@ class VehicleNode:
         self.pub_msgs = node.create_publisher(String, rc.TOPICS["messages"], RELIABLE)
         self._declare_parameters()
         node.add_on_set_parameters_callback(self._on_set_parameters)
-        node.create_timer(core.h / 5.0, self._guard("timer", self._on_timer))
+        node.create_timer(core.h / 5.0, self.guard("timer", lambda: self.run(self.now())))
 
-    # -- helpers -------------------------------------------------------------------------------
-    def now(self) -> float:
-        return self.node.get_clock().now().nanoseconds * 1e-9
-
-    def _guard(self, where: str, fn: Callable[[Any], None] | Callable[[], None]) -> Callable[..., None]:
-        def call(*args: Any) -> None:
-            try:
-                fn(*args)
-            except rc.MessageError as exc:
-                self.warn(where, f"{rc.TOPICS.get(where, where)}: message ignored: {exc}")
-            except Exception as exc:  # noqa: BLE001 - nothing from outside may stop the node
-                self.warn(where + "!", f"{where}: {type(exc).__name__}: {exc} (the node keeps running)")
-        return call
-
-    def _push(self, kind: str, samples: dict[str, float], stamp: float, topic: str) -> None:
-        for result in rc.push_samples(self.core, self.sensor[kind], samples, stamp):
-            if result == "invalid":
-                self.warn(topic + result, f"{topic}: {self.core.last_problem}")
-        if self.recorder is not None:
-            self.recorder.sample(topic, stamp, samples)
-        self._run(self.now())
-
-    # -- callbacks -----------------------------------------------------------------------------
-    def _on_pressure(self, msg: Any) -> None:
-        stamp = _seconds(msg.header.stamp, self.now())
-        depth = rc.depth_from_pressure(msg.fluid_pressure, rho=self.rho, g=self.g, surface_pa=self.surface_pa)
-        self._push("pressure", {"z": depth}, stamp, "pressure")
-
-    def _on_mocap(self, msg: Any) -> None:
-        stamp = _seconds(msg.header.stamp, self.now())
-        pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
-        self._push("motion_capture", rc.pose_samples(pose, "mocap/pose.pose"), stamp, "mocap/pose")
-
-    def _on_imu(self, msg: Any) -> None:
-        stamp = _seconds(msg.header.stamp, self.now())
-        self._push("imu", rc.imu_samples(msg), stamp, "imu")
-
-    def _on_setpoint(self, msg: Any) -> None:
-        s = rc.pose_samples(msg.pose, "setpoint.pose")
-        if s["z"] < 0.0:
-            raise rc.MessageError(f"setpoint depth {s['z']:g} m (ENU z = {-s['z']:g}) is above the surface")
-        engaged = self.core.engaged
-        self.core.set_reference(z=s["z"], psi=s["psi"])
-        if not engaged:
-            self.info(f"first set-point: depth {s['z']:g} m, heading {s['psi']:g} rad; controller engaged")
-
-    def _on_timer(self) -> None:
-        self._run(self.now())
-
-    def _run(self, now: float) -> None:
-        outs = self.core.tick(now)
-        if outs:
-            self.publish(outs[-1])
-
-    def publish(self, out: NodeOutput) -> None:
-        odom = rc.fill_odometry(Odometry(), rc.odometry_content(out))
-        _stamp(odom.header.stamp, out.stamp)
-        self.pub_odom.publish(odom)
-        w = rc.fill_wrench(WrenchStamped(), out.tau)
-        _stamp(w.header.stamp, out.stamp)
-        self.pub_wrench.publish(w)
-        self.pub_pwm.publish(rc.fill_pwm(Float64MultiArray(), MultiArrayDimension, out))
-        if out.k % max(1, int(round(1.0 / self.core.h))) == 0:  # about 1 Hz
-            d = rc.fill_diagnostics(DiagnosticArray(), DiagnosticStatus, KeyValue,
-                                    rc.diagnostics_content(out, self.core.counters,
-                                                           gains=getattr(self.core.design.controller.model, "K", None)))
-            _stamp(d.header.stamp, out.stamp)
-            self.pub_diag.publish(d)
+    def publish_more(self, out: NodeOutput) -> None:
         if self.pub_msgs.get_subscription_count() > 0:  # the HMI (rovlab hmi --source ros2) listens
             self.pub_msgs.publish(String(data=json.dumps(out.messages())))
-        if self.recorder is not None:
-            self.recorder.output(out)
 
     # -- parameters ----------------------------------------------------------------------------
     def _declare_parameters(self) -> None:
@@ -261,34 +192,25 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
     return _spin(vn.node, recorder.close if recorder is not None else None)
 
 
-class SimNode:
+class SimNode(_Ros2, rc.SimAdapter):
     """A SimulatedVehicle on ROS 2 topics, paced by a wall-clock timer."""
 
     def __init__(self, sim: Any, *, namespace: str = "", setpoints: bool = True, wait: bool = True,
                  node_name: str = "rovlab_sim") -> None:
-        self.sim = sim
+        self.setup(sim)
         self.waiting = wait
         self.node = node = Node(node_name, namespace=namespace)
-        self.warn = _Throttle(node.get_logger().warning)
-        truth = sim.prep.truth
-        self.rho, self.g = truth.water_density, truth.gravity
+        self.warn = rc.Throttle(node.get_logger().warning)
+        self.info = node.get_logger().info
         self.pub_p = node.create_publisher(FluidPressure, rc.TOPICS["pressure"], qos_profile_sensor_data)
         self.pub_m = node.create_publisher(PoseStamped, rc.TOPICS["mocap"], qos_profile_sensor_data)
         self.pub_i = node.create_publisher(Imu, rc.TOPICS["imu"], qos_profile_sensor_data)
         self.pub_t = node.create_publisher(Odometry, rc.TOPICS["truth"], RECORDED)
         self.pub_s = node.create_publisher(PoseStamped, rc.TOPICS["setpoint"], RECORDED) if setpoints else None
-        node.create_subscription(Float64MultiArray, rc.TOPICS["pwm"], self._on_pwm, RELIABLE)
-        self.last_ref: tuple[float, float] | None = None
-        self.last_ref_time = -1e9
+        node.create_subscription(Float64MultiArray, rc.TOPICS["pwm"], self.set_pwm, RELIABLE)
         self.t0: float | None = None
         self.ready_at: float | None = None
         node.create_timer(sim.h / 2.0, self._on_timer)
-
-    def _on_pwm(self, msg: Any) -> None:
-        try:
-            self.sim.set_pwm(list(msg.data))
-        except ValueError as exc:
-            self.warn("pwm", f"thrusters/pwm_us ignored: {exc}")
 
     def _on_timer(self) -> None:
         now = self.node.get_clock().now().nanoseconds * 1e-9
@@ -311,57 +233,9 @@ class SimNode:
         due = int((now - self.t0) / self.sim.h + 1e-9) + 1 - self.sim.k
         for _ in range(min(max(due, 0), CATCH_UP)):
             s = self.sim.step()
-            self._publish_step(s, self.t0 + s.t)
+            self.publish_step(s, self.t0 + s.t)
         if due > CATCH_UP:
             self.t0 = now - (self.sim.k - 1) * self.sim.h
-
-    def _publish_step(self, s: Any, now: float) -> None:
-        by_sensor: dict[str, dict[str, float]] = {}
-        for sensor, quantity, value in s.samples:
-            by_sensor.setdefault(sensor, {})[quantity] = value
-        for sensor, values in by_sensor.items():
-            kind = self.sim.sensor_kind(sensor)
-            if kind == "pressure" and "z" in values:
-                m = FluidPressure()
-                _stamp(m.header.stamp, now)
-                m.header.frame_id = sensor
-                m.fluid_pressure = rc.pressure_from_depth(values["z"], rho=self.rho, g=self.g)
-                self.pub_p.publish(m)
-            elif kind == "motion_capture":
-                m = PoseStamped()
-                _stamp(m.header.stamp, now)
-                m.header.frame_id = rc.WORLD_FRAME
-                c = rc.odometry_content(nav={"x": s.truth["x"], "y": s.truth["y"], "z": values.get("z", s.truth["z"]),
-                                             "psi": values.get("psi", s.truth["psi"])})
-                p, q = m.pose.position, m.pose.orientation
-                p.x, p.y, p.z = c["position"]
-                q.x, q.y, q.z, q.w = c["orientation"]
-                self.pub_m.publish(m)
-            elif kind == "imu":
-                m = Imu()
-                _stamp(m.header.stamp, now)
-                m.header.frame_id = rc.BODY_FRAME
-                c = rc.odometry_content(nav={"psi": values.get("psi", 0.0), "r": values.get("r", 0.0)})
-                if "psi" in values:
-                    q = m.orientation
-                    q.x, q.y, q.z, q.w = c["orientation"]
-                else:
-                    m.orientation_covariance[0] = -1.0
-                m.angular_velocity.z = c["angular"][2]
-                self.pub_i.publish(m)
-        t = rc.fill_odometry(Odometry(), rc.odometry_content(nav=s.truth))
-        _stamp(t.header.stamp, now)
-        self.pub_t.publish(t)
-        if self.pub_s is not None and (s.reference != self.last_ref or now - self.last_ref_time > 1.0):
-            m = PoseStamped()
-            _stamp(m.header.stamp, now)
-            m.header.frame_id = rc.WORLD_FRAME
-            c = rc.odometry_content(nav={"z": s.reference[0], "psi": s.reference[1]})
-            m.pose.position.z = c["position"][2]
-            q = m.pose.orientation
-            q.x, q.y, q.z, q.w = c["orientation"]
-            self.pub_s.publish(m)
-            self.last_ref, self.last_ref_time = s.reference, now
 
 
 def run_sim(*, vehicle: str | None, scenario: str, namespace: str = "", setpoints: bool = True,

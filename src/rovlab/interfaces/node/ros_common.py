@@ -32,7 +32,7 @@ import copy
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -393,3 +393,234 @@ class ParameterTable:
 
             atomic_write_text(path, tomlkit.dumps(self.data))
         return path
+
+
+# --------------------------------------------------------------------------------------------
+# The message layer under both adapters (rovlab.interfaces.node.ros1 / ros2): what a vehicle node
+# and a simulated vehicle do with ROS messages, whatever the middleware. An adapter gives it the
+# message classes and how to stamp a header and read a stamp; it keeps the transport (publishers,
+# subscriptions, timers, parameters, spinning).
+# --------------------------------------------------------------------------------------------
+
+class Throttle:
+    """Log a repeated problem at most once per ``period`` seconds, with the count in between
+    (thread-safe: rospy calls back from several threads)."""
+
+    def __init__(self, log: Any, period: float = 2.0) -> None:
+        import threading
+
+        self.log, self.period = log, period
+        self.last: dict[str, float] = {}
+        self.count: dict[str, int] = {}
+        self.lock = threading.Lock()
+
+    def __call__(self, key: str, message: str) -> None:
+        import time
+
+        now = time.monotonic()
+        with self.lock:
+            self.count[key] = self.count.get(key, 0) + 1
+            if now - self.last.get(key, -1e9) < self.period:
+                return
+            n = self.count.pop(key)
+            self.last[key] = now
+        self.log(message + (f" ({n} times since the last report)" if n > 1 else ""))
+
+
+class Messages(NamedTuple):
+    """The ROS message classes both adapters use (each adapter imports them from its middleware)."""
+
+    FluidPressure: Any
+    PoseStamped: Any
+    Imu: Any
+    Odometry: Any
+    WrenchStamped: Any
+    Float64MultiArray: Any
+    MultiArrayDimension: Any
+    DiagnosticArray: Any
+    DiagnosticStatus: Any
+    KeyValue: Any
+
+
+class RosAdapter:
+    """What a vehicle node and a simulated vehicle share on either middleware: stamping, guarding
+    callbacks. A subclass sets ``msgs`` (:class:`Messages`), ``warn`` (:class:`Throttle`) and
+    ``info``, and defines :meth:`now`, :meth:`set_stamp` and :meth:`stamp_seconds`."""
+
+    msgs: Messages
+    warn: Throttle
+    info: Any
+
+    def now(self) -> float:
+        raise NotImplementedError
+
+    def set_stamp(self, header: Any, seconds: float) -> None:
+        """Stamp a message header with a time in seconds."""
+        raise NotImplementedError
+
+    def stamp_seconds(self, stamp: Any, now: float) -> float:
+        """A header stamp in seconds; ``now`` (its arrival) for an unstamped message."""
+        raise NotImplementedError
+
+    def guard(self, where: str, fn: Any) -> Any:
+        """``fn`` as a callback that logs (throttled) what a bad message raises and carries on:
+        nothing from the outside stops the node."""
+        def call(*args: Any) -> None:
+            try:
+                fn(*args)
+            except MessageError as exc:
+                self.warn(where, f"{TOPICS.get(where, where)}: message ignored: {exc}")
+            except Exception as exc:  # noqa: BLE001 - nothing from outside may stop the node
+                self.warn(where + "!", f"{where}: {type(exc).__name__}: {exc} (the node keeps running)")
+        return call
+
+
+class VehicleAdapter(RosAdapter):
+    """The vehicle node's messages (NodeCore behind them): sensor samples in, set-points in,
+    odometry, wrench, PWM and diagnostics out. A subclass creates the publishers ``pub_odom``,
+    ``pub_wrench``, ``pub_pwm``, ``pub_diag`` and routes the sensor and set-point subscriptions to
+    :meth:`on_pressure`, :meth:`on_mocap`, :meth:`on_imu`, :meth:`on_setpoint` (through
+    :meth:`guard`), and ticks :meth:`run` from a timer."""
+
+    pub_odom: Any
+    pub_wrench: Any
+    pub_pwm: Any
+    pub_diag: Any
+
+    def setup(self, core: NodeCore, table: ParameterTable, recorder: Any = None) -> None:
+        self.core, self.table, self.recorder = core, table, recorder
+        v = core.vehicle
+        self.rho, self.g = v.water_density, v.gravity
+        self.surface_pa = SURFACE_PRESSURE_PA
+        self.sensor = {k: core.sensor_of_kind(k) for k in ("pressure", "motion_capture", "imu")}
+
+    def push(self, kind: str, samples: dict[str, float], stamp: float, topic: str) -> None:
+        for result in push_samples(self.core, self.sensor[kind], samples, stamp):
+            if result == "invalid":
+                self.warn(topic + result, f"{topic}: {self.core.last_problem}")
+        if self.recorder is not None:
+            self.recorder.sample(topic, stamp, samples)
+        self.run(self.now())
+
+    def on_pressure(self, msg: Any) -> None:
+        stamp = self.stamp_seconds(msg.header.stamp, self.now())
+        depth = depth_from_pressure(msg.fluid_pressure, rho=self.rho, g=self.g, surface_pa=self.surface_pa)
+        self.push("pressure", {"z": depth}, stamp, "pressure")
+
+    def on_mocap(self, msg: Any) -> None:
+        stamp = self.stamp_seconds(msg.header.stamp, self.now())
+        pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+        self.push("motion_capture", pose_samples(pose, "mocap/pose.pose"), stamp, "mocap/pose")
+
+    def on_imu(self, msg: Any) -> None:
+        self.push("imu", imu_samples(msg), self.stamp_seconds(msg.header.stamp, self.now()), "imu")
+
+    def on_setpoint(self, msg: Any) -> None:
+        s = pose_samples(msg.pose, "setpoint.pose")
+        if s["z"] < 0.0:
+            raise MessageError(f"setpoint depth {s['z']:g} m (ENU z = {-s['z']:g}) is above the surface")
+        engaged = self.core.engaged
+        self.core.set_reference(z=s["z"], psi=s["psi"])
+        if not engaged:
+            self.info(f"first set-point: depth {s['z']:g} m, heading {s['psi']:g} rad; controller engaged")
+
+    def run(self, now: float) -> None:
+        outs = self.core.tick(now)
+        if outs:
+            self.publish(outs[-1])
+
+    def publish(self, out: NodeOutput) -> None:
+        m = self.msgs
+        odom = fill_odometry(m.Odometry(), odometry_content(out))
+        self.set_stamp(odom.header, out.stamp)
+        self.pub_odom.publish(odom)
+        w = fill_wrench(m.WrenchStamped(), out.tau)
+        self.set_stamp(w.header, out.stamp)
+        self.pub_wrench.publish(w)
+        self.pub_pwm.publish(fill_pwm(m.Float64MultiArray(), m.MultiArrayDimension, out))
+        if out.k % max(1, int(round(1.0 / self.core.h))) == 0:  # about 1 Hz
+            d = fill_diagnostics(m.DiagnosticArray(), m.DiagnosticStatus, m.KeyValue, diagnostics_content(
+                out, self.core.counters, gains=getattr(self.core.design.controller.model, "K", None)))
+            self.set_stamp(d.header, out.stamp)
+            self.pub_diag.publish(d)
+        self.publish_more(out)
+        if self.recorder is not None:
+            self.recorder.output(out)
+
+    def publish_more(self, out: NodeOutput) -> None:
+        """What one middleware publishes beyond the common topics (nothing by default)."""
+
+
+class SimAdapter(RosAdapter):
+    """The simulated vehicle's messages: each step's sensor samples (pressure, motion capture, IMU),
+    the truth as odometry and the scenario's set-points. A subclass creates the publishers
+    ``pub_p``, ``pub_m``, ``pub_i``, ``pub_t`` and ``pub_s`` (None without set-points)."""
+
+    pub_p: Any
+    pub_m: Any
+    pub_i: Any
+    pub_t: Any
+    pub_s: Any
+
+    def setup(self, sim: Any) -> None:
+        self.sim = sim
+        truth = sim.prep.truth
+        self.rho, self.g = truth.water_density, truth.gravity
+        self.last_ref: tuple[float, float] | None = None
+        self.last_ref_time = -1e9
+
+    def publish_step(self, s: Any, now: float) -> None:
+        m = self.msgs
+        by_sensor: dict[str, dict[str, float]] = {}
+        for sensor, quantity, value in s.samples:
+            by_sensor.setdefault(sensor, {})[quantity] = value
+        for sensor, values in by_sensor.items():
+            kind = self.sim.sensor_kind(sensor)
+            if kind == "pressure" and "z" in values:
+                p = m.FluidPressure()
+                self.set_stamp(p.header, now)
+                p.header.frame_id = sensor
+                p.fluid_pressure = pressure_from_depth(values["z"], rho=self.rho, g=self.g)
+                self.pub_p.publish(p)
+            elif kind == "motion_capture":
+                pm = m.PoseStamped()
+                self.set_stamp(pm.header, now)
+                pm.header.frame_id = WORLD_FRAME
+                c = odometry_content(nav={"x": s.truth["x"], "y": s.truth["y"], "z": values.get("z", s.truth["z"]),
+                                          "psi": values.get("psi", s.truth["psi"])})
+                pos, q = pm.pose.position, pm.pose.orientation
+                pos.x, pos.y, pos.z = c["position"]
+                q.x, q.y, q.z, q.w = c["orientation"]
+                self.pub_m.publish(pm)
+            elif kind == "imu":
+                im = m.Imu()
+                self.set_stamp(im.header, now)
+                im.header.frame_id = BODY_FRAME
+                c = odometry_content(nav={"psi": values.get("psi", 0.0), "r": values.get("r", 0.0)})
+                if "psi" in values:
+                    q = im.orientation
+                    q.x, q.y, q.z, q.w = c["orientation"]
+                else:  # no orientation (REP 145): -1 in the first entry of its covariance
+                    im.orientation_covariance = [-1.0] + [0.0] * 8
+                im.angular_velocity.z = c["angular"][2]
+                self.pub_i.publish(im)
+        t = fill_odometry(m.Odometry(), odometry_content(nav=s.truth))
+        self.set_stamp(t.header, now)
+        self.pub_t.publish(t)
+        if self.pub_s is not None and (s.reference != self.last_ref or now - self.last_ref_time > 1.0):
+            sp = m.PoseStamped()
+            self.set_stamp(sp.header, now)
+            sp.header.frame_id = WORLD_FRAME
+            c = odometry_content(nav={"z": s.reference[0], "psi": s.reference[1]})
+            sp.pose.position.z = c["position"][2]
+            q = sp.pose.orientation
+            q.x, q.y, q.z, q.w = c["orientation"]
+            self.pub_s.publish(sp)
+            self.last_ref, self.last_ref_time = s.reference, now
+
+    def set_pwm(self, msg: Any) -> None:
+        """The thrusters' PWM commands of a message (a wrong one is logged and ignored)."""
+        try:
+            self.sim.set_pwm(list(msg.data))
+        except ValueError as exc:
+            self.warn("pwm", f"thrusters/pwm_us ignored: {exc}")
