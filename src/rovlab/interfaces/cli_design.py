@@ -174,10 +174,6 @@ def _offline_filter(args: argparse.Namespace):
     """(filter, its input columns, vehicle, configuration) for ``rovlab filter``: the
     depth-and-heading filter's own replay for estimator kf (its kernels, its inputs Z and N), any
     other registered estimator through its slots (rovlab.estimation.offline; the wrench X, Y, Z, N)."""
-    from rovlab.core.components import component, unknown_component
-    from rovlab.estimation.kalman import DepthHeadingFilter
-    from rovlab.estimation.model import build_filter_model
-    from rovlab.estimation.offline import WRENCH_COLUMNS, ComponentFilter
     from rovlab.params.design import load_design_config
     from rovlab.params.vehicle import load_vehicle
 
@@ -185,9 +181,15 @@ def _offline_filter(args: argparse.Namespace):
     config = load_design_config(args.config)
     name = args.estimator or config.estimator
     if name == "kf":
+        from rovlab.estimation.kalman import DepthHeadingFilter
+        from rovlab.estimation.model import build_filter_model
+
         model = build_filter_model(vehicle, config)
         _check_initial(config, model)
         return DepthHeadingFilter(model), INPUT_COLUMNS, vehicle, config
+    from rovlab.core.components import component, unknown_component
+    from rovlab.estimation.offline import WRENCH_COLUMNS, ComponentFilter
+
     info = component("estimator", name)
     if info is None:
         where = "--estimator" if args.estimator else f"{config.file}: estimator"

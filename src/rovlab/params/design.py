@@ -309,7 +309,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     estimator_info = component("estimator", estimator) if estimator else None
     if estimator and estimator_info is None:
         top.problem("estimator", estimator, unknown_component("estimator", estimator))
-    if controller and component("controller", controller) is None:
+    if controller and controller not in component_names("controller"):  # (its module is imported when built)
         top.problem("controller", controller, unknown_component("controller", controller))
     measurable = estimator_info.measurable if estimator_info is not None and estimator_info.measurable else MEASURABLE
 
