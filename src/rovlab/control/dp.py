@@ -48,7 +48,25 @@ import numpy as np
 
 from rovlab._jit import njit
 from rovlab.core.angles import wrap_angle
-from rovlab.core.components import ComponentInfo, ControllerSpec, register_component, register_controller
+from rovlab.core.components import (
+    NAV_BN,
+    NAV_BX,
+    NAV_BY,
+    NAV_BZ,
+    NAV_PSI,
+    NAV_R,
+    NAV_U,
+    NAV_V,
+    NAV_W,
+    NAV_X,
+    NAV_Y,
+    NAV_Z,
+    REF_PSI,
+    ComponentInfo,
+    ControllerSpec,
+    register_component,
+    register_controller,
+)
 from rovlab.models import kinetics as kin
 from rovlab.params.design import DP_AXES, DesignConfig, per_key
 from rovlab.params.validate import ConfigError, Problem, TableReader
@@ -132,7 +150,7 @@ def _damping(ctrl, i, v):
 @njit(cache=True)
 def _dp_step(ctrl, t, nav, ref, tau):
     s = ctrl.state
-    psi = nav[3]
+    psi = nav[NAV_PSI]
     c, sn = math.cos(psi), math.sin(psi)
     if s[_STARTED] == 0.0:  # start the reference model where the vehicle is
         for i in range(4):
@@ -143,10 +161,10 @@ def _dp_step(ctrl, t, nav, ref, tau):
         s[_STARTED] = 1.0
     # NED errors (heading wrapped) against the reference model's pose (scalars: the closed loop
     # allocates nothing, rovlab.sim.loop.run_loop)
-    e0 = nav[0] - s[_ETA + 0]
-    e1 = nav[1] - s[_ETA + 1]
-    e2 = nav[2] - s[_ETA + 2]
-    e3 = wrap_angle(nav[3] - s[_ETA + 3])
+    e0 = nav[NAV_X] - s[_ETA + 0]
+    e1 = nav[NAV_Y] - s[_ETA + 1]
+    e2 = nav[NAV_Z] - s[_ETA + 2]
+    e3 = wrap_angle(nav[NAV_PSI] - s[_ETA + 3])
     s[_ERR + 0] = e0
     s[_ERR + 1] = e1
     s[_ERR + 2] = e2
@@ -160,17 +178,17 @@ def _dp_step(ctrl, t, nav, ref, tau):
     v_d = -sn * vx + c * vy
     du_d = c * ax + sn * ay
     dv_d = -sn * ax + c * ay
-    tau[0] = (ctrl.M[0] * du_d + _damping(ctrl, 0, u_d) - (c * fx + sn * fy) - ctrl.Kd[0] * (nav[4] - u_d) - nav[8])
-    tau[1] = (ctrl.M[1] * dv_d + _damping(ctrl, 1, v_d) - (-sn * fx + c * fy) - ctrl.Kd[1] * (nav[5] - v_d) - nav[9])
+    tau[0] = (ctrl.M[0] * du_d + _damping(ctrl, 0, u_d) - (c * fx + sn * fy) - ctrl.Kd[0] * (nav[NAV_U] - u_d) - nav[NAV_BX])
+    tau[1] = (ctrl.M[1] * dv_d + _damping(ctrl, 1, v_d) - (-sn * fx + c * fy) - ctrl.Kd[1] * (nav[NAV_V] - v_d) - nav[NAV_BY])
     tau[2] = (ctrl.M[2] * s[_ACC + 2] + _damping(ctrl, 2, s[_VEL + 2]) - ctrl.Kp[2] * e2 - ctrl.Ki[2] * s[_INT + 2]
-              - ctrl.Kd[2] * (nav[6] - s[_VEL + 2]) - nav[10])
+              - ctrl.Kd[2] * (nav[NAV_W] - s[_VEL + 2]) - nav[NAV_BZ])
     tau[3] = (ctrl.M[3] * s[_ACC + 3] + _damping(ctrl, 3, s[_VEL + 3]) - ctrl.Kp[3] * e3 - ctrl.Ki[3] * s[_INT + 3]
-              - ctrl.Kd[3] * (nav[7] - s[_VEL + 3]) - nav[11])
+              - ctrl.Kd[3] * (nav[NAV_R] - s[_VEL + 3]) - nav[NAV_BN])
     # advance the reference model toward the set-point (heading: the short way round)
     for i in range(4):
         r = ref[i]
         if i == 3:
-            r = s[_ETA + 3] + wrap_angle(ref[3] - s[_ETA + 3])
+            r = s[_ETA + 3] + wrap_angle(ref[REF_PSI] - s[_ETA + 3])
         reference_model_step(s[_ETA + i:_ETA + i + 1], s[_VEL + i:_VEL + i + 1], s[_ACC + i:_ACC + i + 1], r,
                              ctrl.omega_r[i], ctrl.zeta_r, ctrl.v_max[i], ctrl.h, _REF_SUBSTEPS)
     s[_ETA + 3] = wrap_angle(s[_ETA + 3])

@@ -32,7 +32,20 @@ import numpy as np
 from rovlab._jit import njit
 from rovlab.control.lqr import LQRDesign, design_lqr_from_config
 from rovlab.core.angles import wrap_angle
-from rovlab.core.components import ComponentInfo, ControllerSpec, register_component, register_controller
+from rovlab.core.components import (
+    NAV_BN,
+    NAV_BZ,
+    NAV_PSI,
+    NAV_R,
+    NAV_W,
+    NAV_Z,
+    REF_PSI,
+    REF_Z,
+    ComponentInfo,
+    ControllerSpec,
+    register_component,
+    register_controller,
+)
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
 
@@ -79,15 +92,15 @@ class LQG(NamedTuple):
     state: np.ndarray  # (0)
 
 
-_FROM_NAV = (2, 3, 6, 7, 10, 11)  # z, psi, w, r, b_Z, b_N in rovlab.core.components.TRUTH
+_FROM_NAV = (NAV_Z, NAV_PSI, NAV_W, NAV_R, NAV_BZ, NAV_BN)
 
 
 @njit(cache=True)
 def _lqg_step(ctrl, t, nav, ref, tau):
     for i in range(6):
         ctrl.x6[i] = nav[_FROM_NAV[i]]
-    ctrl.r2[0] = ref[2]
-    ctrl.r2[1] = ref[3]
+    ctrl.r2[0] = ref[REF_Z]
+    ctrl.r2[1] = ref[REF_PSI]
     lqg_tau(ctrl.K, ctrl.P, ctrl.x6, ctrl.r2, ctrl.u2)
     tau[0] = 0.0
     tau[1] = 0.0

@@ -64,7 +64,20 @@ import numpy as np
 from rovlab._jit import njit
 from rovlab.control.lqg import lqg_tau
 from rovlab.control.lqr import LQRDesign, design_lqr_from_config
-from rovlab.core.components import ComponentInfo, ControllerSpec, register_component, register_controller
+from rovlab.core.components import (
+    NAV_BN,
+    NAV_BZ,
+    NAV_PSI,
+    NAV_R,
+    NAV_W,
+    NAV_Z,
+    REF_PSI,
+    REF_Z,
+    ComponentInfo,
+    ControllerSpec,
+    register_component,
+    register_controller,
+)
 from rovlab.models.discretise import zoh
 from rovlab.params.design import DesignConfig
 from rovlab.params.validate import ConfigError, Problem, TableReader
@@ -169,19 +182,19 @@ class MRAC(NamedTuple):
     started: np.ndarray  # (1): 0 until the reference model has been set to the first estimate
 
 
-_FROM_NAV = (2, 3, 6, 7, 10, 11)  # z, psi, w, r, b_Z, b_N in rovlab.core.components.TRUTH
+_FROM_NAV = (NAV_Z, NAV_PSI, NAV_W, NAV_R, NAV_BZ, NAV_BN)
 
 
 @njit(cache=True)
 def _mrac_step(ctrl, t, nav, ref, tau):
     st = ctrl.state
-    z = nav[2]
-    w = nav[6]
+    z = nav[NAV_Z]
+    w = nav[NAV_W]
     if ctrl.started[0] == 0.0:  # the reference model starts where the vehicle is
         st[_IZM] = z
         st[_IWM] = w
         ctrl.started[0] = 1.0
-    r = ref[2]
+    r = ref[REF_Z]
     am = reference_accel(st[_IZM], st[_IWM], r, ctrl.om2, ctrl.c1)
     Z, s = heave_law(st, z, w, st[_IZM], st[_IWM], am, ctrl.lam, ctrl.k_s, ctrl.Y)
     ctrl.mem[0] = r
@@ -190,7 +203,7 @@ def _mrac_step(ctrl, t, nav, ref, tau):
     for i in range(6):
         ctrl.x6[i] = nav[_FROM_NAV[i]]
     ctrl.r2[0] = r
-    ctrl.r2[1] = ref[3]
+    ctrl.r2[1] = ref[REF_PSI]
     lqg_tau(ctrl.K, ctrl.P, ctrl.x6, ctrl.r2, ctrl.u2)
     tau[0] = 0.0
     tau[1] = 0.0

@@ -57,6 +57,13 @@ ANGLES = frozenset({"psi"})
 # Layout of the reference vector and of a wrench.
 REFERENCE = ("x", "y", "z", "psi")
 WRENCH = ("X", "Y", "Z", "N")
+# The same layouts as named indices, for kernels (a module-level integer is a constant to numba:
+# nav[NAV_W] compiles to what nav[6] did)
+NAV_X, NAV_Y, NAV_Z, NAV_PSI, NAV_U, NAV_V, NAV_W, NAV_R, NAV_BX, NAV_BY, NAV_BZ, NAV_BN = range(12)
+REF_X, REF_Y, REF_Z, REF_PSI = range(4)
+TAU_X, TAU_Y, TAU_Z, TAU_N = range(4)
+if TRUTH != ("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N"):  # pragma: no cover - a reminder
+    raise ImportError("rovlab.core.components: the NAV_* indices no longer follow TRUTH")
 
 _STATE: dict[type, tuple[str, ...]] = {}  # component class -> its state fields
 _DRAWS: dict[type, int] = {}  # plant class -> standard normal draws per integration step

@@ -28,7 +28,7 @@ import numpy as np
 
 from rovlab._jit import njit
 from rovlab.core.angles import wrap_angle
-from rovlab.core.components import register_plant
+from rovlab.core.components import NAV_BN, NAV_BX, NAV_BY, NAV_BZ, NAV_PSI, NAV_R, NAV_W, NAV_Z, register_plant
 from rovlab.models.kinetics import P_BUOY, P_WEIGHT, rk4_scalars, submerged
 
 
@@ -68,15 +68,15 @@ def _process_truth(plant, truth):
     x = plant.x
     for i in range(8):
         truth[i] = x[i]
-    truth[3] = wrap_angle(x[3])
+    truth[NAV_PSI] = wrap_angle(x[3])
     # the force the estimator's bias states should absorb: Gauss-Markov bias + net buoyancy
     # (+ the extra heave force of the last step)
-    truth[8] = plant.bias[0]
-    truth[9] = plant.bias[1]
+    truth[NAV_BX] = plant.bias[0]
+    truth[NAV_BY] = plant.bias[1]
     ps = plant.p_sets[int(plant.dist[0])]
     net_up = submerged(ps, x[2]) * ps[P_BUOY] - ps[P_WEIGHT]
-    truth[10] = plant.bias[2] + plant.dist[1] - net_up
-    truth[11] = plant.bias[3]
+    truth[NAV_BZ] = plant.bias[2] + plant.dist[1] - net_up
+    truth[NAV_BN] = plant.bias[3]
 
 
 @njit(cache=True)
@@ -122,12 +122,12 @@ def _observer_truth(plant, truth):
     x = plant.x
     for i in range(truth.shape[0]):
         truth[i] = 0.0
-    truth[2] = x[0]
-    truth[3] = wrap_angle(x[1])
-    truth[6] = x[2]
-    truth[7] = x[3]
-    truth[10] = x[4] + plant.dist[0]
-    truth[11] = x[5]
+    truth[NAV_Z] = x[0]
+    truth[NAV_PSI] = wrap_angle(x[1])
+    truth[NAV_W] = x[2]
+    truth[NAV_R] = x[3]
+    truth[NAV_BZ] = x[4] + plant.dist[0]
+    truth[NAV_BN] = x[5]
 
 
 @njit(cache=True, inline="always")

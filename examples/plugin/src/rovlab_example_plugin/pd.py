@@ -16,11 +16,20 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-# the estimate the loop hands a controller is in rovlab's TRUTH layout
-from rovlab.core.components import TRUTH_INDEX as _T
-from rovlab.core.components import ComponentInfo, ControllerSpec, register_component, register_controller
-
-_Z, _PSI, _W, _R = _T["z"], _T["psi"], _T["w"], _T["r"]
+# the estimate the loop hands a controller is in rovlab's TRUTH layout, the reference in REFERENCE's:
+# their entries by name
+from rovlab.core.components import (
+    NAV_PSI,
+    NAV_R,
+    NAV_W,
+    NAV_Z,
+    REF_PSI,
+    REF_Z,
+    ComponentInfo,
+    ControllerSpec,
+    register_component,
+    register_controller,
+)
 
 
 @dataclass(frozen=True)
@@ -45,12 +54,12 @@ class PD(NamedTuple):
 
 @njit(cache=False)
 def _step(ctrl, t, nav, ref, tau):
-    e_psi = ref[3] - nav[_PSI]
+    e_psi = ref[REF_PSI] - nav[NAV_PSI]
     e_psi = e_psi - 2.0 * math.pi * math.floor((e_psi + math.pi) / (2.0 * math.pi))
     tau[0] = 0.0
     tau[1] = 0.0
-    tau[2] = ctrl.kp_z * (ref[2] - nav[_Z]) - ctrl.kd_z * nav[_W] + ctrl.net_buoyancy
-    tau[3] = ctrl.kp_psi * e_psi - ctrl.kd_psi * nav[_R]
+    tau[2] = ctrl.kp_z * (ref[REF_Z] - nav[NAV_Z]) - ctrl.kd_z * nav[NAV_W] + ctrl.net_buoyancy
+    tau[3] = ctrl.kp_psi * e_psi - ctrl.kd_psi * nav[NAV_R]
 
 
 register_controller(PD, state=("state",), step=_step)
