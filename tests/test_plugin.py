@@ -86,6 +86,14 @@ def test_the_hmi_session_runs_them():
     assert len(estimates) == 20 and all(np.isfinite(float(e["state"]["z"])) for e in estimates)
     summary = session.source.loop_summary()
     assert summary["controller"] == "pd" and set(summary["R"]) == {"qualisys.z", "pressure.z", "qualisys.psi"}
+    # its table is tuned like any rovlab table: the loader refuses a bad value, a good one redesigns
+    from rovlab.interfaces.hmi.session import CommandError
+
+    with pytest.raises(CommandError) as err:
+        session.handle({"cmd": "set", "target": "config", "key": "pd.kp_z", "value": -5})
+    assert "pd.kp_z" in str(err.value)
+    session.handle({"cmd": "set", "target": "config", "key": "pd.kp_z", "value": 30})
+    assert session.source.sim.prep.design.controller.kernel.kp_z == 30.0
 
 
 def test_rovlab_filter_replays_a_log_with_the_plugins_estimator(tmp_path):
@@ -99,3 +107,17 @@ def test_rovlab_filter_replays_a_log_with_the_plugins_estimator(tmp_path):
     a, b = read_log(run / "timeseries.csv"), read_log(est)
     for s in ("z", "psi", "w", "r"):  # the in-loop estimates, to the log's 10 significant digits
         np.testing.assert_allclose(b[f"est_{s}"], a[f"est_{s}"], rtol=1e-7, atol=1e-8, err_msg=s)
+
+
+def test_the_vehicle_nodes_tune_its_tables_at_run_time():
+    """The ROS 1/2 nodes' parameters (rovlab.interfaces.node.ros_common.ParameterTable) include the
+    numbers of every component table the design file has: here [pd] and [complementary]."""
+    from rovlab.interfaces.node.runtime import load_node
+
+    core, table = load_node("udrone", str(CONFIG))
+    assert table.values["pd.kp_z"] == 40.0 and table.values["complementary.k_vel"] == 1.0
+    reason = table.set({"pd.kp_z": -1.0})
+    assert reason is not None and "pd.kp_z" in reason  # refused by the loader, with the key
+    assert core.design.config.table("pd").kp_z == 40.0  # and nothing changed
+    assert table.set({"pd.kp_z": 30.0}) is None
+    assert core.design.config.table("pd").kp_z == 30.0 and core.controller.kp_z == 30.0  # redesigned, running

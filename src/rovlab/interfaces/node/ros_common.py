@@ -248,7 +248,9 @@ def push_samples(core: NodeCore, sensor: str | None, samples: Mapping[str, float
 # Parameters: the configuration file's numbers, set through the file loader
 # --------------------------------------------------------------------------------------------
 
-_TUNABLE_TABLES = ("process_noise", "fusion", "lqr", "mrac", "model")
+# the tables of every design file whose numbers are run-time parameters; besides them, the tables
+# of the components that the file has ([mrac], [ekf], [dp], a plugin's [pd]: DesignConfig.tables)
+_TUNABLE_TABLES = ("process_noise", "fusion", "lqr", "model")
 
 
 def _numeric(v: Any) -> bool:
@@ -273,7 +275,7 @@ def _parameters(data: Mapping[str, Any], design: Any) -> dict[str, tuple[str, An
             elif _numeric(v) or (isinstance(v, list) and v and all(_numeric(x) for x in v)):
                 out[name] = (name, [float(x) for x in v] if isinstance(v, list) else float(v))
 
-    for table in _TUNABLE_TABLES:
+    for table in (*_TUNABLE_TABLES, *design.config.tables):
         if isinstance(data.get(table), Mapping):
             walk(data[table], table)
     channels = design.estimator.channels
@@ -294,7 +296,8 @@ def _parameters(data: Mapping[str, Any], design: Any) -> dict[str, tuple[str, An
 
 class ParameterTable:
     """The node's run-time parameters: the configuration file's numbers (process noise W, bias
-    time constants, measurement variances R, fusion settings, LQR weights, MRAC, model overrides),
+    time constants, measurement variances R, fusion settings, LQR weights, model overrides, and
+    the numbers of every component table the file has: [mrac], [ekf], [dp], a plugin's),
     one on/off switch per sensor and one mode per filter channel.
 
     Names are the file's key paths (``process_noise.psd.w``, ``lqr.state_max.z``), a measurement's
