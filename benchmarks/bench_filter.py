@@ -114,7 +114,7 @@ def single_step_times(filt, u, y) -> tuple[float, float]:
 
 
 def main() -> None:
-    from rovlab.estimation.kalman import DepthHeadingFilter
+    from rovlab.estimation.filtering import DepthHeadingFilter
 
     t0 = time.perf_counter()
     filt = DepthHeadingFilter.from_files("udrone", "thesis")
@@ -222,7 +222,7 @@ def whole_process() -> None:
     import statistics
     import tempfile
 
-    from rovlab.estimation.kalman import DepthHeadingFilter
+    from rovlab.estimation.filtering import DepthHeadingFilter
     from rovlab.io.logs import ChunkWriter
 
     global N

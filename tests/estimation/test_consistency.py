@@ -7,7 +7,7 @@ import pytest
 from scipy.stats import chi2
 
 from rovlab.estimation.consistency import check, chi2_interval, nees, nis, wrap_errors
-from rovlab.estimation.kalman import DepthHeadingFilter
+from rovlab.estimation.filtering import DepthHeadingFilter
 from rovlab.estimation.model import build_filter_model
 from rovlab.params.design import load_design_config
 from rovlab.params.vehicle import load_vehicle

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rovlab.estimation.kalman import DepthHeadingFilter, StreamingFilter, plan_steps, steps_between
+from rovlab.estimation.filtering import DepthHeadingFilter
+from rovlab.estimation.streaming import StreamingFilter, plan_steps, steps_between
 from rovlab.interfaces.cli import main
 from rovlab.io.logs import read_log
 from rovlab.params.design import packaged_config_path

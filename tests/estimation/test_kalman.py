@@ -9,17 +9,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from rovlab.estimation.filtering import Belief, DepthHeadingFilter
 from rovlab.estimation.fusion import CFG_R, N_CH, REP_R
-from rovlab.estimation.kalman import (
-    FLAG_INPUT,
-    FLAG_TIME,
-    Belief,
-    DepthHeadingFilter,
-    kf_step,
-    kf_workspace,
-    steps_between,
-)
+from rovlab.estimation.kalman import FLAG_INPUT, FLAG_TIME, kf_step, kf_workspace
 from rovlab.estimation.model import build_filter_model
+from rovlab.estimation.streaming import steps_between
 from rovlab.params.design import load_design_config
 from rovlab.params.vehicle import load_vehicle
 

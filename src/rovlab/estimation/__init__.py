@@ -8,6 +8,6 @@
 * ``kalman``      -- the discrete Kalman filter: compiled kernels, Belief, DepthHeadingFilter
 * ``consistency`` -- NEES / NIS with chi-square bounds for Monte Carlo checks
 
-Submodules are imported explicitly (``from rovlab.estimation.kalman import DepthHeadingFilter``),
+Submodules are imported explicitly (``from rovlab.estimation.filtering import DepthHeadingFilter``),
 so importing one does not pull in the others.
 """

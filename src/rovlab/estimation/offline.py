@@ -3,8 +3,8 @@
 The simulator and the vehicle node run an estimator through its slots (rovlab.core.components:
 ``estimator_correct`` with the samples of a step, ``estimator_predict`` with the wrench); so does
 this module, over the rows of a log, so the offline and the in-loop estimator are the same
-component. :class:`ComponentFilter` has the interface of rovlab.estimation.kalman's
-DepthHeadingFilter that rovlab.estimation.kalman.StreamingFilter drives (``initial_belief``,
+component. :class:`ComponentFilter` has the interface of
+rovlab.estimation.filtering.DepthHeadingFilter that rovlab.estimation.streaming.StreamingFilter drives (``initial_belief``,
 ``run``): a log is filtered in chunks, with the same gap handling, restarts and refusals.
 
 The belief between chunks is the component itself (its state arrays, rovlab.core.components.fresh).
@@ -82,7 +82,7 @@ class _Model:
 
 class ComponentFilter:
     """An estimator component (an :class:`EstimatorSpec` built by its declaration) run over a log
-    chunk by chunk, as rovlab.estimation.kalman.DepthHeadingFilter is."""
+    chunk by chunk, as rovlab.estimation.filtering.DepthHeadingFilter is."""
 
     p = len(WRENCH_COLUMNS)
 
@@ -105,9 +105,10 @@ class ComponentFilter:
     def run(self, t: np.ndarray, u: np.ndarray, y: np.ndarray, *, belief: Any = None,
             n_predict: np.ndarray | None = None, present: np.ndarray | None = None, hold_input: bool = False) -> Any:
         """Filter rows t (N), inputs u (N x 4: X, Y, Z, N) and samples y (N x m, NaN = none) from
-        ``belief`` (default: the initial one); a rovlab.estimation.kalman.FilterRun whose belief is
+        ``belief`` (default: the initial one); a rovlab.estimation.filtering.FilterRun whose belief is
         the component after the last row."""
-        from rovlab.estimation.kalman import FilterRun, hold_last
+        from rovlab.estimation.filtering import FilterRun
+        from rovlab.estimation.streaming import hold_last
 
         t = np.ascontiguousarray(t, dtype=float)
         N = t.shape[0]

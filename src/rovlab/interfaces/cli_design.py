@@ -146,7 +146,7 @@ def _print_matrix(name: str, M: np.ndarray) -> None:
 
 def _check_initial(config, model) -> None:
     """Refuse an initial belief no filter can start from (e.g. a depth of 1e308 m)."""
-    from rovlab.estimation.kalman import MAX_ABS_SAMPLE
+    from rovlab.estimation.streaming import MAX_ABS_SAMPLE
 
     problems = []
     for i, name in enumerate(model.states):
@@ -181,7 +181,7 @@ def _offline_filter(args: argparse.Namespace):
     config = load_design_config(args.config)
     name = args.estimator or config.estimator
     if name == "kf":
-        from rovlab.estimation.kalman import DepthHeadingFilter
+        from rovlab.estimation.filtering import DepthHeadingFilter
         from rovlab.estimation.model import build_filter_model
 
         model = build_filter_model(vehicle, config)
@@ -265,7 +265,6 @@ def _filter(args: argparse.Namespace, vehicle, config, filt, inputs: tuple[str, 
 
 def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tuple[str, ...], absent: tuple[str, ...],
                    stream, chunks, columns: list[str], source: dict[str, str]) -> int:
-    from rovlab.estimation.kalman import IntervalError, StreamingFilter
     from rovlab.estimation.layout import (
         EVENT_NONFINITE,
         EVENT_REJECTED,
@@ -275,6 +274,7 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
         STATUS_NAMES,
         status_label,
     )
+    from rovlab.estimation.streaming import IntervalError, StreamingFilter
     from rovlab.interfaces.cli import UserError
     from rovlab.io.logs import ChunkWriter
     from rovlab.io.tables import write_sidecar
