@@ -445,7 +445,7 @@ class NodeCore:
         if key not in _COMPILED:
             started = time.perf_counter()
             self._log(f"rovlab node: preparing the compiled control step ({type(est).__name__} + "
-                      f"{type(ctl).__name__}); the first run on a machine compiles it (about a minute), "
+                      f"{type(ctl).__name__}); the first run on a machine compiles it (up to ~30 s), "
                       "later runs load it from the cache ...")
             # warm-up on copies, with no samples: the running state is not touched
             ew, cw = fresh(est), fresh(ctl)
