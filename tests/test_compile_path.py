@@ -199,6 +199,43 @@ def test_a_stale_stamp_removes_rovlabs_cache_files_and_nothing_else(tmp_path, mo
     assert all((folder / name).exists() for name in ours)
 
 
+# Modules that kernel modules import from but numba never compiles (design code, file readers,
+# the decorator itself): their edits cannot change a compiled kernel.
+PYTHON_ONLY = {"_jit.py", "allocation/geometry.py", "control/lqr.py", "estimation/filtering.py", "estimation/model.py",
+               "estimation/streaming.py", "models/discretise.py", "params/design.py", "params/validate.py",
+               "params/vehicle.py"}
+
+
+def test_what_kernels_are_compiled_from_is_in_the_cache_key():
+    """numba compiles the module-level constants a kernel reads into it (estimation/layout.py's
+    column indices, allocation/lexicographic.py's tolerances): every rovlab module a kernel
+    module imports names from is a kernel module itself, or named above as plain Python."""
+    import ast
+
+    listed = set(_jit.KERNEL_MODULES)
+    missing = {}
+    for name in listed:
+        for node in ast.walk(ast.parse((ROOT / name).read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("rovlab."):
+                base = node.module[len("rovlab."):].replace(".", "/")
+                targets = [f"{base}/{a.name}.py" for a in node.names if (ROOT / base / f"{a.name}.py").is_file()] \
+                    or [f"{base}.py"]
+                for t in targets:
+                    if t not in listed and t not in PYTHON_ONLY:
+                        missing.setdefault(t, set()).add(name)
+    assert not missing, f"add to rovlab._jit.KERNEL_MODULES (or to PYTHON_ONLY here, if numba never compiles it): {missing}"
+
+
+def test_numbas_undocumented_nrt_option_is_used_in_one_place():
+    """_nrt (numba's reference counting) goes through rovlab._jit.WITHOUT_NRT / WITH_NRT only, so
+    a numba without it needs one edit (the docstring there)."""
+    import re
+
+    for path in ROOT.rglob("*.py"):
+        if path.name != "_jit.py":
+            assert not re.search(r"\b_nrt\s*=", path.read_text(encoding="utf-8")), path.relative_to(ROOT)
+
+
 def test_every_module_with_kernels_is_in_the_cache_key():
     import re
 
@@ -273,3 +310,25 @@ def test_a_monte_carlo_with_spawned_workers_equals_the_forked_one_and_leaves_no_
             np.testing.assert_array_equal(a["nees"], b["nees"])
         assert summarise_runs(spawned)["metrics"] == summarise_runs(other)["metrics"]
     assert mp.active_children() == []
+
+
+def test_a_loop_that_ran_elsewhere_is_known_as_cached_and_one_whose_source_changed_is_not(tmp_path):
+    """rovlab compare (or a Monte Carlo, or the HMI) compiles a loop without saying how long: the
+    next command must not announce a compile that will not happen. And numba recompiles the loop
+    when its own file is touched: then the announcement must come back."""
+    code = """
+import json, os, sys
+from rovlab.interfaces.cli import main
+from rovlab.sim import compile as c, loop
+assert c.needs_compiling("process-kf-mrac")
+assert main(["compare", "heave-payload", "--controllers", "mrac", "--runs", "1", "--out", sys.argv[1], "--no-figure"]) == 0
+after_compare = c.needs_compiling("process-kf-mrac")
+real = c._sources
+st = os.stat(loop.__file__)
+c._sources = lambda: {**real(), "loop_file": [st.st_mtime + 1.0, st.st_size]}  # as if loop.py was touched
+print(json.dumps({"after_compare": after_compare, "after_touch": c.needs_compiling("process-kf-mrac")}))
+"""
+    res = subprocess.run([sys.executable, "-c", code, str(tmp_path / "cmp")], capture_output=True, text=True,
+                         timeout=600, cwd=tmp_path, env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")})
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout.strip().splitlines()[-1]) == {"after_compare": False, "after_touch": True}

@@ -39,6 +39,7 @@ directly and never import numba or compile anything.
 from __future__ import annotations
 
 import hashlib
+import os
 import sys
 import threading
 import types
@@ -46,29 +47,34 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-# The modules whose source the compiled kernels are made of (tests/architecture checks that every
-# module calling njit or LazyKernels is listed): their digest keys rovlab's compiled kernels.
+# The modules whose source the compiled kernels are made of: those that define kernels, and those
+# whose module-level constants numba compiles into them (estimation/layout.py's column indices,
+# allocation/lexicographic.py's tolerances). Their digest keys rovlab's compiled kernels;
+# tests/test_compile_path.py checks that every module a kernel module imports from is listed, or
+# named there as plain Python (design code numba never compiles).
 KERNEL_MODULES = (
-    "allocation/kernels.py", "allocation/solvers.py",
+    "allocation/kernels.py", "allocation/lexicographic.py", "allocation/solvers.py",
     "control/dp.py", "control/lqg.py", "control/mrac.py",
     "core/angles.py", "core/components.py",
-    "estimation/ekf.py", "estimation/fusion.py", "estimation/kalman.py", "estimation/kf.py", "estimation/offline.py",
+    "estimation/ekf.py", "estimation/fusion.py", "estimation/kalman.py", "estimation/kf.py", "estimation/layout.py",
+    "estimation/offline.py",
     "io/csvtext.py",
     "models/kinetics.py", "models/sensors.py", "models/thruster_kernels.py", "models/thrusters.py",
     "sim/actuators.py", "sim/loop.py", "sim/plant.py", "sim/step.py",
 )
 STAMP = "rovlab-kernels.stamp"  # beside numba's cache files of rovlab's kernels
 
-# numba's compile option for a function without reference counting, for the four entry points of
-# the closed loop (rovlab.sim.loop.run_loop; rovlab.sim.step's control_step, plant_push and
-# plant_sample), and its opposite for a kernel they call that allocates (which would otherwise
-# inherit it). The one option rovlab uses that numba does not document (it is spelled with an
-# underscore; numba's own test suite uses it, and it has not changed since numba 0.4x). Measured
-# on the 2-core machine (numba 0.68.1, step-process-model, 60 s): the loop takes 0.82 ms with it
-# and 2.42 ms without (the components' arrays are increfed and decrefed at every call boundary),
-# and a 1000-run Monte Carlo 1.6 s against 2.4 s as a whole process. A numba without the option
-# fails loudly ("Unrecognized options") the first time the loop compiles; deleting these two
-# dictionaries' entries is then the whole fix.
+# numba's compile option for a function without reference counting, for the five entry points that
+# run components (rovlab.sim.loop.run_loop; rovlab.sim.step's control_step, plant_push and
+# plant_sample; rovlab.estimation.offline.replay), and its opposite for a kernel they call that
+# allocates (which would otherwise inherit it). The one option rovlab uses that numba does not
+# document (it is spelled with an underscore; numba's own test suite uses it, and it has not
+# changed since numba 0.4x). Measured on the 2-core machine (numba 0.68.1, step-process-model,
+# 60 s): the loop takes 0.82 ms with it and 2.42 ms without (the components' arrays are increfed
+# and decrefed at every call boundary), and a 1000-run Monte Carlo 1.6 s against 2.4 s as a whole
+# process (issue 25's floor is 3.5 M vehicle-steps/s: 1.7 s). Every use goes through these two
+# dictionaries (tests/test_compile_path.py checks it): with a numba that drops the option,
+# emptying them is the whole fix (slower, not wrong).
 WITHOUT_NRT: dict[str, Any] = {"_nrt": False}
 WITH_NRT: dict[str, Any] = {"_nrt": True}
 
@@ -119,7 +125,7 @@ def _check_stamp(folder: str) -> None:
             if f.suffix in (".nbi", ".nbc") and f.name.split(".")[0] + ".py" in _MODULE_FILES:
                 f.unlink(missing_ok=True)
         path.mkdir(parents=True, exist_ok=True)
-        tmp = path / f".{STAMP}.{threading.get_ident()}.tmp"
+        tmp = path / f".{STAMP}.{os.getpid()}.{threading.get_ident()}.tmp"
         tmp.write_text(digest + "\n")
         tmp.replace(stamp)
     except OSError:

@@ -119,7 +119,7 @@ def test_a_kernel_that_allocates_inside_the_loop_is_refused_with_the_line_and_th
     text = str(err.value)
     assert "AllocatingDepth allocates memory" in text and "inside the closed loop" in text
     assert f"{__file__}, line" in text  # where: numba's report, made readable
-    assert "_nrt=True" in text and "fields of the component" in text and "returns no array" in text  # what to do
+    assert "WITH_NRT" in text and "fields of the component" in text and "returns no array" in text  # what to do
 
 
 def test_unknown_components_and_missing_estimates_are_refused_by_name():

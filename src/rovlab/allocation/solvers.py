@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rovlab._jit import LazyKernels
+from rovlab._jit import WITH_NRT, LazyKernels
 from rovlab.allocation import kernels as _plain
 from rovlab.allocation.geometry import configuration_matrix
 from rovlab.models import thruster_kernels as _plain_thrusters
@@ -44,9 +44,9 @@ def weighted_pinv(B: np.ndarray, weights: np.ndarray | None = None) -> np.ndarra
     return s[:, None] * np.linalg.pinv(B * s[None, :])
 
 
-# _nrt=True: some allocate, and the closed loop that calls them is compiled without reference
+# WITH_NRT (reference counting on): some allocate, and the closed loop that calls them is compiled without reference
 # counting, which they would otherwise inherit (rovlab.sim.loop)
-_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True, _nrt=True)
+_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True, **WITH_NRT)
 __getattr__ = _kernels.module_getattr(__name__)  # allocate_kernel, matvec: numba dispatchers (on first use)
 
 

@@ -27,7 +27,7 @@ and Motion Control, Wiley:
   K_p = M omega_n^2, K_d = 2 zeta omega_n M - D_L, K_i = (omega_n / 10) K_p (the rule of thumb
   K_i ~ omega_n / 10 K_p; ``integral_ratio``). M = diag(m - X_udot, m - Y_vdot, m - Z_wdot,
   I_zz - N_rdot), D_L = -diag(X_u, Y_v, Z_w, N_r). The bias is **subtracted**: it enters the model
-  like a force (SPEC sec. 11, the thesis's eq. 5.29 erratum). Keeping the integral in NED means a
+  like a force (the thesis's eq. 5.29 has + b_hat, an erratum). Keeping the integral in NED means a
   constant current's force does not have to be re-learnt after every heading change.
 * **Anti-windup** by back-calculation (Astrom & Hagglund 2006, Advanced PID Control, sec. 3.5):
   when the allocation achieves tau_a != tau_d (thrusters saturated), the integral moves so the PID

@@ -18,7 +18,7 @@ Prediction over one sample h (the input tau held, zero-order hold):
   Van Loan's method for Phi = e^{A h} and the discrete process noise
   Q = int_0^h e^{A s} E W E^T e^{A^T s} ds (Van Loan 1978, IEEE TAC 23(3); the matrix exponential by
   Pade (6, 6) with scaling and squaring, Golub & Van Loan 2013, Matrix Computations, alg. 9.3.1):
-  P = Phi P Phi^T + Q (not Phi P Phi^T + Gamma Q Gamma^T: the thesis's erratum, SPEC sec. 11).
+  P = Phi P Phi^T + Q (not Phi P Phi^T + Gamma Q Gamma^T as Sandøy 2016, sec. 5.1.2 writes: an erratum).
 
 Correction: every sensor of the 4-DOF model is linear in this state (motion capture x, y, z, psi;
 pressure depth with the lever arm z_VO = z_sensor - l_z at zero roll and pitch; IMU heading and

@@ -21,10 +21,10 @@ import numpy as np
 
 from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.core.components import EstimatorSpec, estimator_correct, estimator_predict, fresh
+from rovlab.estimation.kalman import FLAG_TIME  # a row whose time is not finite
 from rovlab.estimation.layout import CH_REASON, CH_STATUS, EVENT_NONE, N_REP, REP_EVENT, REP_INNOV, REP_S
 
 WRENCH_COLUMNS = ("tau_X", "tau_Y", "tau_Z", "tau_N")  # the inputs, in the slots' order
-FLAG_TIME = 4  # as rovlab.estimation.kalman: a row whose time is not finite
 
 
 class ReplayOut(NamedTuple):

@@ -57,8 +57,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 def _cmd_compile(args: argparse.Namespace) -> int:
     from rovlab.interfaces.cli import UserError
-    from rovlab.sim.compile import compile_loop, needs_compiling
-    from rovlab.sim.runner import prepare
+    from rovlab.sim.compile import needs_compiling
+    from rovlab.sim.runner import compile_loop, prepare, shipped_components
     from rovlab.sim.scenario import load_scenario_data, packaged_scenario_names
 
     if bool(args.scenarios) == bool(args.all):
@@ -76,11 +76,17 @@ def _cmd_compile(args: argparse.Namespace) -> int:
         if key in seen:
             continue
         seen.add(key)
+        if not shipped_components(prep):
+            print(f"{key:24s} not cached: components from outside rovlab are compiled in every process ({ref})")
+            continue
         if not needs_compiling(key):
             print(f"{key:24s} cached ({ref})")
             continue
         print(f"{key:24s} compiling ({ref}) ...", end="", flush=True)
-        print(f" {compile_loop(prep):.1f} s")
+        try:
+            print(f" {compile_loop(prep):.1f} s")
+        except TypeError as exc:  # a component kernel that allocates (rovlab.sim.loop.allocation_error)
+            raise UserError(f"{ref}: {exc}") from None
     print(f"{len(seen)} loop{'s' if len(seen) != 1 else ''} ready in {time.perf_counter() - total:.1f} s")
     return 0
 
@@ -156,6 +162,10 @@ def _run(data, file, seed, compiled: list[float] | None = None):
         result = run_prepared(prep)
     except PlantDiverged as exc:
         raise UserError(f"{file}: {exc}") from None
+    except TypeError as exc:
+        if "allocates memory" not in str(exc):  # (rovlab.sim.loop.allocation_error's explanation)
+            raise
+        raise UserError(f"{file}: {exc}") from None  # a component kernel that allocates
     return result, summarise(result)
 
 

@@ -32,27 +32,37 @@ def announce_compile(loops: list[tuple[str, str, float] | None]) -> None:
     """Say which loops compile now (those numba has not cached yet), before they do."""
     from rovlab.sim.compile import needs_compiling
 
-    todo = list(dict.fromkeys(what for key, what, _ in filter(None, loops) if needs_compiling(key)))
+    todo = list(dict.fromkeys(what for key, what, _ in filter(None, loops) if needs_compiling(key, shipped=_shipped(key))))
     if todo:
         print(f"compiling {', '.join(todo)} (once per machine: numba caches {'it' if len(todo) == 1 else 'them'}; "
               f"up to ~30 s {'' if len(todo) == 1 else 'each '}on 2 cores, less when they share kernels) ...",
               file=sys.stderr, flush=True)
 
 
+def _shipped(key: str) -> bool:
+    """Whether the estimator and controller of a loop key are rovlab's own."""
+    from rovlab.core.components import SHIPPED
+
+    _plant, rest = key.split("-", 1)
+    return any(rest == f"{e}-{c}" for e in SHIPPED["estimator"] for c in SHIPPED["controller"])
+
+
 def ensure_compiled(prep: Any, *, say: bool = True) -> float | None:
     """Compile the loop a prepared run needs if numba has not cached it yet, saying so (unless
     not ``say``: the caller says it) and how long it took; the seconds, or None if it was cached."""
-    from rovlab.sim.compile import compile_loop, needs_compiling
+    from rovlab.sim.compile import needs_compiling
+    from rovlab.sim.runner import compile_loop, shipped_components
 
-    if not needs_compiling(prep.loop_key):
+    shipped = shipped_components(prep)
+    if not needs_compiling(prep.loop_key, shipped=shipped):
         return None
     sc = prep.scenario
     what = f"the {sc.estimator or prep.config.estimator} + {sc.controller or prep.config.controller} loop ({sc.plant} plant)"
+    how = "once per machine: numba caches it for later runs" if shipped else \
+        "components from outside rovlab: compiled in every process"
     if say:
-        print(f"compiling {what} (once per machine: numba caches it for later runs) ...", file=sys.stderr, flush=True)
+        print(f"compiling {what} ({how}) ...", file=sys.stderr, flush=True)
     seconds = compile_loop(prep)
     if say:
         print(f"compiled {what} in {seconds:.1f} s", file=sys.stderr, flush=True)
     return seconds
-
-

@@ -24,7 +24,7 @@ from importlib import resources
 
 import numpy as np
 
-from rovlab._jit import LazyKernels
+from rovlab._jit import WITH_NRT, LazyKernels
 from rovlab.models import thruster_kernels as _plain
 from rovlab.models.thruster_kernels import (  # noqa: F401  (re-exported: the row layout)
     K_DEAD,
@@ -86,9 +86,9 @@ def t200_force_table(voltage: float) -> np.ndarray:
 # Kernels on packed rows: plain Python in rovlab.models.thruster_kernels, compiled on first use
 # --------------------------------------------------------------------------------------------
 
-# _nrt=True: some allocate, and the closed loop that calls them is compiled without reference
+# WITH_NRT (reference counting on): some allocate, and the closed loop that calls them is compiled without reference
 # counting, which they would otherwise inherit (rovlab.sim.loop)
-_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True, _nrt=True)
+_kernels = LazyKernels(_plain, _plain.KERNELS, cache=True, **WITH_NRT)
 __getattr__ = _kernels.module_getattr(__name__)  # bank_force, bank_pwm: numba dispatchers
 
 

@@ -1,27 +1,29 @@
-"""Compiling the simulator's loop: when, how long, and saying so.
+"""Whether the simulator's loop will be compiled, for the commands that say so.
 
 The loop (rovlab.sim.loop.run_loop) is compiled by numba once per combination of components
 (plant, estimator, controller) and kept in numba's disk cache (rovlab._jit), so only the first
-run of a combination on a machine waits for it (~20-30 s on a 2-core machine) and every later
+run of a combination on a machine waits for it (~10-30 s on a 2-core machine) and every later
 process loads it (~0.3 s). Nothing compiles in the background: the command that needs the loop
 compiles it in the foreground and says so, and ``rovlab compile`` prepares the cache ahead
-(e.g. in a Dockerfile).
+(e.g. in a Dockerfile). Components from outside rovlab (a plugin, a script) never enter that
+cache: their loop is compiled in every process (rovlab.sim.loop.loop_for).
 
-:func:`needs_compiling` tells a command whether it will wait (so it can say so first). It reads
-a small record that :func:`compile_loop` writes beside numba's cache files of the loop: the
-combinations compiled from the present kernel sources, with their compile times. The record is
-only a hint for that message: numba decides what it loads.
+:func:`needs_compiling` tells a command whether it will wait. It reads a small record beside
+numba's cache files of the loop: the combinations that ran through the cached loop, with their
+compile times, valid while the kernel sources (rovlab._jit.kernel_digest) and the loop's source
+file (whose modification time and size numba checks itself) are those it was written with. The
+record is only a hint for that message: numba decides what it loads.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import time
 from pathlib import Path
 from typing import Any
 
 RECORD = "rovlab-loops.json"
+_noted: set[str] = set()  # combinations this process has seen run through the cached loop
 
 
 def _record_file() -> Path | None:
@@ -32,9 +34,19 @@ def _record_file() -> Path | None:
     return Path(folder) / RECORD if folder else None
 
 
-def _read() -> dict[str, Any]:
-    from rovlab._jit import kernel_digest
+def _sources() -> dict[str, Any]:
+    from rovlab import _jit
+    from rovlab.sim import loop
 
+    try:
+        st = os.stat(loop.__file__)
+        stamp: Any = [st.st_mtime, st.st_size]
+    except OSError:
+        stamp = None
+    return {"kernels": _jit.kernel_digest(), "loop_file": stamp}
+
+
+def _read() -> dict[str, Any]:
     path = _record_file()
     if path is None:
         return {}
@@ -42,45 +54,47 @@ def _read() -> dict[str, Any]:
         data = json.loads(path.read_text())
     except (OSError, ValueError):
         return {}
-    if not isinstance(data, dict) or data.get("kernels") != kernel_digest() or not isinstance(data.get("loops"), dict):
-        return {}  # compiled from other kernel sources or versions: numba compiles again
+    if not isinstance(data, dict) or not isinstance(data.get("loops"), dict) \
+            or any(data.get(k) != v for k, v in _sources().items()):
+        return {}  # compiled from other sources (or the loop's file touched): numba compiles again
     return data["loops"]
 
 
-def needs_compiling(key: str) -> bool:
+def needs_compiling(key: str, *, shipped: bool = True) -> bool:
     """Whether the loop for this combination of components (rovlab._jit.loop_key) is not in
-    numba's cache yet, as far as rovlab's record knows."""
+    numba's cache, as far as rovlab's record knows; always for components from outside rovlab
+    (``shipped`` False), whose loop is compiled in every process."""
+    from rovlab import _jit
+    from rovlab.sim.loop import run_loop
+
+    if not hasattr(run_loop, "stats"):
+        return False  # numba's JIT is disabled (NUMBA_DISABLE_JIT): everything runs as plain Python
+    return not shipped or bool(_jit.compiled_in_memory()) or key not in _read()
+
+
+def record(key: str, seconds: float | None = None) -> None:
+    """Note that the loop for ``key`` is in numba's cache (compiled in ``seconds``, if known)."""
     from rovlab._jit import compiled_in_memory
-
-    if os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0"):
-        return False  # the user runs numba's kernels as plain Python: nothing compiles
-    return bool(compiled_in_memory()) or key not in _read()
-
-
-def record(key: str, seconds: float) -> None:
-    """Note that the loop for ``key`` is in numba's cache now (after compiling it in ``seconds``)."""
-    from rovlab._jit import compiled_in_memory, kernel_digest
 
     path = _record_file()
     if path is None or compiled_in_memory():
         return
     loops = dict(_read())
-    loops[key] = round(seconds, 1)
+    if seconds is not None or key not in loops:
+        loops[key] = None if seconds is None else round(seconds, 1)
     tmp = path.with_name(f".{RECORD}.{os.getpid()}.tmp")
     try:
-        tmp.write_text(json.dumps({"kernels": kernel_digest(), "loops": loops}, indent=1))
+        tmp.write_text(json.dumps({**_sources(), "loops": loops}, indent=1))
         tmp.replace(path)
     except OSError:
         tmp.unlink(missing_ok=True)  # a cache folder we cannot write: only the message is affected
 
 
-def compile_loop(prep: Any) -> float:
-    """Compile the loop for a prepared run's components (or load it from numba's cache) by running
-    its first control step on a copy of its components; returns the seconds it took."""
-    from rovlab.sim.runner import Simulation, first_rows
-
-    t0 = time.perf_counter()
-    Simulation(prep).advance(first_rows(prep.drive, 1))
-    seconds = time.perf_counter() - t0
-    record(prep.loop_key, seconds)
-    return seconds
+def note_cached(key: str) -> None:
+    """Called after a run through the cached loop (rovlab.sim.runner.Simulation): record the
+    combination if the record does not have it yet (once per process and combination)."""
+    if key in _noted:
+        return
+    _noted.add(key)
+    if key not in _read():
+        record(key)

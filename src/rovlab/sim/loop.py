@@ -229,7 +229,8 @@ def allocation_error(exc: BaseException, components: tuple[object, ...]) -> Type
         f"a kernel of the components {names} allocates memory (an array, a list, a string or an exception "
         f"message built at run time) inside the closed loop{line}. The loop is compiled without numba's "
         "reference counting, so its kernels must not allocate: keep scratch arrays as fields of the component "
-        "(see docs/architecture.md), or move the work into a separate njit function decorated with _nrt=True "
+        "(see docs/architecture.md), or move the work into a separate njit function decorated with "
+        "**rovlab._jit.WITH_NRT (numba's reference counting on) "
         "that allocates inside and returns no array (an array it returned would never be freed)")
 
 

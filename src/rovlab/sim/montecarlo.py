@@ -6,8 +6,8 @@ designed once per process (:class:`Campaign`); each run then only redraws what i
 Runs go to a pool of worker processes (stdlib ``concurrent.futures``; the parent designs and
 runs the first seed first, which compiles the loop or loads it from numba's cache, so the workers
 find it in the cache) or, with ``backend="dask"``, to a Dask cluster. The pool's workers are
-forked where the platform offers it (they inherit the design and the loaded loop) and spawned
-elsewhere (macOS, Windows; or ``start_method="spawn"``): a spawned worker designs once and loads
+forked on Linux (they inherit the design and the loaded loop) and spawned elsewhere (macOS,
+Windows; or ``start_method="spawn"``): a spawned worker designs once and loads
 the loop from the cache. Workers return only the metrics and the NEES/NIS series, not the logs.
 """
 
@@ -105,7 +105,7 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     work (e.g. writing the files of its single run), done in this process while the workers run
     (before the runs when there are no workers); an error in it stops the runs and is raised.
     ``start_method``: how the pool starts its workers (multiprocessing's "fork", "spawn" or
-    "forkserver"; default: "fork" where the platform has it, else its default)."""
+    "forkserver"; default: "fork" on Linux, the platform's default elsewhere)."""
     seeds = list(seeds)
     workers = max(1, workers or os.cpu_count() or 1)
     if backend == "dask":
@@ -139,8 +139,8 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     done = 1
     rest = seeds[1:]
     chunks = _guided_chunks(rest, workers)
-    if start_method is None:
-        start_method = "fork" if "fork" in mp.get_all_start_methods() else None
+    if start_method is None:  # fork on Linux only: macOS has it, but forking after LLVM and its frameworks
+        start_method = "fork" if sys.platform.startswith("linux") else None  # loaded is unsafe (Python's own default)
     ctx = mp.get_context(start_method)
     fork = ctx.get_start_method() == "fork"
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=_init_worker,

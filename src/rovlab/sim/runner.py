@@ -41,8 +41,9 @@ from rovlab.params.validate import ConfigError, Problem
 from rovlab.params.vehicle import Vehicle, load_vehicle
 from rovlab.sim import metrics as mx
 from rovlab.sim.actuators import Actuators, make_actuators
+from rovlab.sim.compile import note_cached, record
 from rovlab.sim.components import build_pair
-from rovlab.sim.loop import Drive, Logs, draw, explain_allocation, loop_for, new_logs, new_work
+from rovlab.sim.loop import Drive, Logs, draw, explain_allocation, loop_for, new_logs, new_work, run_loop
 from rovlab.sim.plant import ObserverPlant, ProcessPlant
 from rovlab.sim.scenario import Scenario, scenario_from_dict
 
@@ -441,6 +442,8 @@ class Simulation:
         loop = loop_for(self.plant, self.estimator, self.controller)
         with explain_allocation((self.plant, self.estimator, self.controller)):
             done = loop(self.k, self.k + n, prep.h, *args)
+        if loop is run_loop:  # in numba's cache now: commands need not say they compile it next time
+            note_cached(prep.loop_key)
         self.k += done
         if done < n:
             raise PlantDiverged(self.k * prep.h, logs, done)
@@ -448,6 +451,23 @@ class Simulation:
 
 
 _LOGS = 8  # position of the logs in Simulation.loop_arguments
+
+
+def shipped_components(prep: Prepared) -> bool:
+    """Whether every component of a prepared run is rovlab's own (its loop is in numba's disk
+    cache; components from outside rovlab are compiled in every process)."""
+    return loop_for(prep.plant, prep.design.estimator.kernel, prep.design.controller.kernel) is run_loop
+
+
+def compile_loop(prep: Prepared) -> float:
+    """Compile the loop for a prepared run's components (or load it from numba's cache) by running
+    its first control step on a copy of its components; returns the seconds it took."""
+    t0 = time.perf_counter()
+    Simulation(prep).advance(first_rows(prep.drive, 1))
+    seconds = time.perf_counter() - t0
+    if shipped_components(prep):
+        record(prep.loop_key, seconds)
+    return seconds
 
 
 def columns(prep: Prepared, logs: Logs, times: np.ndarray, refs: np.ndarray) -> dict[str, np.ndarray]:

@@ -151,6 +151,3 @@ def plant_sample(k, plant, sensors, drive, row, truth, y, present):
         sample_sensors(sensors, truth, k, drive.sensor_normals, drive.dropout, row, y, present)
     return finite
 
-
-plant_push_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(plant_push, "py_func", plant_push))
-plant_sample_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(plant_sample, "py_func", plant_sample))

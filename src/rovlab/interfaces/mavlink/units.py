@@ -1,4 +1,4 @@
-"""MAVLink units <-> SI, in one place (SPEC section 1: SI inside, other units only at the edge).
+"""MAVLink units <-> SI, in one place (docs/conventions.md: SI inside, other units only at the edge).
 
 * Pressure: SCALED_PRESSURE* carry press_abs in hPa (1 hPa = 100 Pa) and temperature in cdegC.
   Depth of the sensor z = (p_abs - p_surface) / (rho g), positive down.
