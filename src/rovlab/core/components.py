@@ -311,24 +311,33 @@ def register_component(info: ComponentInfo) -> None:
     _COMPONENTS[info.kind][info.name] = info
 
 
+_FOUND: dict[str, dict[str, Callable[[], Any]]] = {}  # kind -> the declared components, looked up once
+
+
 def _declared(kind: str) -> dict[str, Callable[[], Any]]:
-    """name -> how to import the module that declares it: the shipped ones, then entry points."""
+    """name -> how to import the module that declares it: the shipped ones, then the entry points
+    of installed packages (read once per process: scanning the installed packages' metadata costs
+    tens of milliseconds, and a design file is loaded per run by some callers)."""
+    found = _FOUND.get(kind)
+    if found is not None:
+        return found
     import functools
     import importlib
 
     out: dict[str, Callable[[], Any]] = {}
     for name, module in SHIPPED[kind].items():
         out[name] = functools.partial(importlib.import_module, module)
-    found: Any = ()
+    eps: Any = ()
     try:
         from importlib.metadata import entry_points
 
-        found = entry_points(group=ENTRY_POINT_GROUPS[kind])
+        eps = entry_points(group=ENTRY_POINT_GROUPS[kind])
     except Exception:  # noqa: BLE001 - broken package metadata must not stop rovlab
         pass
-    for ep in found:
+    for ep in eps:
         if ep.name not in out:  # a shipped name cannot be taken over
             out[ep.name] = ep.load
+    _FOUND[kind] = out
     return out
 
 
