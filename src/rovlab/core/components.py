@@ -270,6 +270,9 @@ SHIPPED = {
     "controller": {"lqg": "rovlab.control.lqg", "mrac": "rovlab.control.mrac", "dp": "rovlab.control.dp"},
 }
 ENTRY_POINT_GROUPS = {"estimator": "rovlab.estimators", "controller": "rovlab.controllers"}
+# the keys every design file has (rovlab.params.design): no component's table may take one
+RESERVED = frozenset({"name", "description", "source", "sample_time", "estimator", "controller", "model",
+                      "process_noise", "initial", "fusion", "measurements", "lqr"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -308,6 +311,11 @@ def register_component(info: ComponentInfo) -> None:
         raise ValueError(f"component name {info.name!r}: letters, digits, '-' and '_' only")
     if (info.parse_table is None) != (info.default_table is None):
         raise ValueError(f"component {info.name!r}: parse_table and default_table go together")
+    if info.name in RESERVED:
+        raise ValueError(f"component name {info.name!r} is a key of every design file; choose another")
+    shipped = SHIPPED[info.kind].get(info.name)
+    if shipped is not None and getattr(info.build, "__module__", None) != shipped:
+        raise ValueError(f"{info.kind} {info.name!r} is rovlab's own ({shipped}); a plugin chooses another name")
     _COMPONENTS[info.kind][info.name] = info
 
 
@@ -358,6 +366,8 @@ def component(kind: str, name: str) -> ComponentInfo | None:
     try:
         loaded = load()
     except Exception as exc:  # noqa: BLE001 - a broken plugin is reported by name, not a traceback
+        if name in SHIPPED[kind]:
+            raise  # a bug in rovlab itself: its traceback, not a user error
         _FAILED[kind][name] = f"{type(exc).__name__}: {exc}"
         return None
     if isinstance(loaded, ComponentInfo):
