@@ -183,7 +183,7 @@ def test_plant_rk4_by_angle_addition_equals_sin_cos_at_every_stage(udrone, curre
     ref = reference(x0)
     assert ref[3] - x0[3] > 8 * 2 * math.pi  # it did turn
     np.testing.assert_allclose(x, ref, rtol=0.0, atol=1e-12)
-    once = x0.copy()  # one call for the whole run (as rovlab.sim.vehicle does): the same to rounding
+    once = x0.copy()  # one call for the whole run: the same to rounding
     process_advance(p, once, tau, 0.01, noise_std, normals)
     np.testing.assert_allclose(once, ref, rtol=0.0, atol=1e-12)
 

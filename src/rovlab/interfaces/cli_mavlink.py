@@ -16,15 +16,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     cmds = p.add_subparsers(dest="mavlink_command", metavar="ACTION")
     cmds.required = True
 
-    s = cmds.add_parser("sim", help="a simulated ArduSub vehicle speaking MAVLink, on rovlab's plant model")
-    s.add_argument("--vehicle", default="bluerov2_heavy",
-                   help="vehicle name or TOML file (default bluerov2_heavy)")
+    s = cmds.add_parser("sim", help="a simulated ArduSub vehicle speaking MAVLink: a scenario's plant and sensors "
+                                    "in real time")
+    s.add_argument("--scenario", default="bluerov2-heavy-step",
+                   help="packaged scenario name or TOML file whose plant, sensors, noise, biases and drop-outs "
+                        "are simulated (default bluerov2-heavy-step; its set-points are not used)")
+    s.add_argument("--vehicle", default=None,
+                   help="vehicle name or TOML file replacing the scenario's (default: the scenario's)")
     s.add_argument("--connect", default="udpout:127.0.0.1:14550",
                    help="pymavlink connection string (default udpout:127.0.0.1:14550: sends to a ground "
                         "station listening with udpin on 14550, as a vehicle does)")
-    s.add_argument("--depth", type=float, default=0.0, help="initial depth [m] (default 0)")
-    s.add_argument("--heading-deg", type=float, default=0.0, help="initial heading [deg] (default 0)")
-    s.add_argument("--seed", type=int, default=0, help="seed of the plant and sensor noise (default 0)")
+    s.add_argument("--depth", type=float, default=None, help="initial depth [m] (default: the scenario's)")
+    s.add_argument("--heading-deg", type=float, default=None, help="initial heading [deg] (default: the scenario's)")
+    s.add_argument("--seed", type=int, default=None, help="seed of the plant and sensor noise (default: the "
+                                                           "scenario's)")
     s.add_argument("--local-position", action="store_true",
                    help="also send LOCAL_POSITION_NED (as a vehicle with a positioning system does)")
     s.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: run "
@@ -133,27 +138,42 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     from rovlab.interfaces.cli import UserError
     from rovlab.interfaces.mavlink import MavlinkMissing
     from rovlab.params.vehicle import load_vehicle
+    from rovlab.sim.scenario import load_scenario
 
-    for name in ("depth", "heading_deg"):
-        if not math.isfinite(getattr(args, name)):
+    initial = {}
+    for name, key, scale in (("depth", "z", 1.0), ("heading_deg", "psi", math.pi / 180.0)):
+        value = getattr(args, name)
+        if value is None:
+            continue
+        if not math.isfinite(value):
             raise UserError(f"--{name.replace('_', '-')} must be a finite number")
+        initial[key] = value * scale
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be > 0 s, got {args.duration}")
     _check_connect(args.connect)
-    vehicle = load_vehicle(args.vehicle)
+    scenario = load_scenario(args.scenario, seed=args.seed)
+    vehicle = load_vehicle(args.vehicle) if args.vehicle else None
+
+    def log(text: str) -> None:
+        print(f"rovlab mavlink sim: {text}", file=sys.stderr, flush=True)
+
     try:
         from rovlab.interfaces.mavlink.vehicle_sim import ArduSubSim
+        from rovlab.sim.realtime import SimulatedVehicle
 
-        sim = ArduSubSim(vehicle, connect=args.connect, seed=args.seed, depth_m=args.depth,
-                         heading_rad=math.radians(args.heading_deg), local_position=args.local_position,
-                         log=lambda text: print(f"rovlab mavlink sim: {text}", file=sys.stderr, flush=True))
+        try:
+            vsim = SimulatedVehicle(scenario, vehicle=vehicle, initial=initial)
+        except ValueError as exc:
+            raise UserError(f"scenario {args.scenario}: {exc}") from None
+        _compile_announced(vsim, log)
+        sim = ArduSubSim(vsim, connect=args.connect, local_position=args.local_position, log=log)
     except MavlinkMissing as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:
         raise UserError(f"cannot open {args.connect}: {exc.strerror or exc}") from None
     _stop_on_signals(sim.stop)
-    print(f"rovlab mavlink sim: {vehicle.name} as ArduSub system {sim.sysid} on {args.connect} "
-          f"({len(vehicle.thrusters)} thrusters; Ctrl-C stops)", flush=True)
+    print(f"rovlab mavlink sim: {sim.vehicle.name} ({scenario.name}, seed {scenario.seed}) as ArduSub system "
+          f"{sim.sysid} on {args.connect} ({len(sim.vehicle.thrusters)} thrusters; Ctrl-C stops)", flush=True)
     try:
         sim.run(duration_s=args.duration)
     finally:
@@ -161,6 +181,26 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         print(f"rovlab mavlink sim: stopped ({sim.counts['received']} messages received, "
               f"{sim.counts['bad_data']} malformed, {sim.counts['refused']} refused)", file=sys.stderr, flush=True)
     return 0
+
+
+def _compile_announced(vsim: Any, log: Any) -> None:
+    """Compile the simulated vehicle's plant before anything is sent (a ground station that sees a
+    HEARTBEAT and then nothing declares the link lost); say so when it takes a while."""
+    import threading
+
+    done = threading.Event()
+
+    def announce() -> None:
+        if not done.wait(1.0):
+            log("compiling the simulated vehicle's plant (once per machine: numba caches it) ...")
+
+    t = threading.Thread(target=announce, daemon=True)
+    t.start()
+    seconds = vsim.compile()
+    done.set()
+    t.join()
+    if seconds > 1.0:
+        log(f"compiled the simulated vehicle's plant in {seconds:.1f} s")
 
 
 def _cmd_record(args: argparse.Namespace) -> int:

@@ -1,21 +1,26 @@
 """A simulated vehicle stepped from outside: PWM commands in, truth and sensor samples out.
 
-The other half of the vehicle node (rovlab.interfaces.node): where the closed-loop simulator runs
+The one simulated vehicle behind every middleware: where the closed-loop simulator runs
 estimator, controller and plant in one compiled loop, a :class:`SimulatedVehicle` runs only the
 plant and the sensors of a scenario, one control period per :meth:`SimulatedVehicle.step`, with
-the thrust of whatever PWM commands it was last given. A middleware adapter paces it in real time
-and publishes its samples on the vehicle's topics, so the node runs against it as against the
-real vehicle. Same components, same noise model, same drop-out windows and truth events as the
-scenario's batch run (rovlab.sim.step.plant_push / plant_sample).
+the thrust of whatever PWM commands it was last given. A middleware paces it in real time and
+sends its samples as the real vehicle would: the ROS simulators (``rovlab ros2|ros1 sim``,
+rovlab.interfaces.node) on the vehicle's topics, the MAVLink simulator (``rovlab mavlink sim``,
+rovlab.interfaces.mavlink.vehicle_sim) as ArduSub's telemetry. Same components, same noise model,
+biases, drop-out windows and truth events as the scenario's batch run
+(rovlab.sim.step.plant_push / plant_sample).
 """
 
 from __future__ import annotations
 
+import time
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
+from rovlab.core.angles import wrap_angle
 from rovlab.core.components import N_TRUTH, TRUTH, fresh, plant_draws
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
@@ -42,10 +47,18 @@ class SimulatedVehicle:
     """A scenario's plant and sensors, advanced one control period at a time (not thread-safe)."""
 
     def __init__(self, scenario: str | Scenario, *, seed: int | None = None, vehicle: Vehicle | None = None,
-                 truth: Vehicle | None = None, config: DesignConfig | None = None) -> None:
+                 truth: Vehicle | None = None, config: DesignConfig | None = None,
+                 initial: Mapping[str, float] | None = None) -> None:
+        """``vehicle`` replaces the scenario's vehicle (model and truth), ``truth`` only the plant's;
+        ``initial`` replaces entries of the scenario's true initial state by name (x, y, z [m],
+        psi [rad], u, v, w [m/s], r [rad/s]); ValueError for an unknown name or a value that is not
+        finite."""
         from rovlab.models.thrusters import bank_pwm
 
-        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, seed=seed)
+        sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, seed=seed)
+        if initial:
+            sc = replace(sc, initial=_initial_state(sc.initial, initial))
+        self.scenario = sc
         seed = self.scenario.seed if seed is None else seed
         self.prep = prepare(replace(self.scenario, duration_s=0.0), vehicle=vehicle, truth=truth, config=config,
                             book=DesignBook())
@@ -114,6 +127,21 @@ class SimulatedVehicle:
         return VehicleSample(k, t, dict(zip(TRUTH, map(float, self._truth))), samples,
                              self.scenario.reference_at(t), self._tau.copy())
 
+    def compile(self) -> float:
+        """Compile the plant's step if numba has not cached it yet, without advancing this vehicle
+        (on copies of its state, with draws of their own); the seconds it took. A middleware calls
+        it before it announces the vehicle, so nothing waits on a vehicle that cannot step yet."""
+        from rovlab.sim.step import plant_push, plant_sample
+
+        t0 = time.perf_counter()
+        prep = self.prep
+        plant = fresh(prep.plant)
+        m = len(prep.channels)
+        plant_push(plant, prep.actuators, prep.drive, 0, self.neutral_pwm.copy(), np.zeros(4))
+        plant_sample(0, plant, prep.sensors, prep.drive, 0, np.empty(N_TRUTH), np.empty(m),
+                     np.zeros(m, dtype=np.bool_))
+        return time.perf_counter() - t0
+
     def _chunk_for(self, k: int) -> Drive:
         if self._drive is None or not (self._k0 <= k < self._k0 + _CHUNK):
             prep, sc = self.prep, self.scenario
@@ -125,3 +153,18 @@ class SimulatedVehicle:
             self._drive = Drive(plant_n, bias_n, sensor_n, dropout, refs, heave, pset)
             self._k0 = k
         return self._drive
+
+
+_STATE = ("x", "y", "z", "psi", "u", "v", "w", "r")  # layout of Scenario.initial
+
+
+def _initial_state(initial: np.ndarray, names: Mapping[str, float]) -> np.ndarray:
+    out = np.array(initial, dtype=float)
+    for name, value in names.items():
+        if name not in _STATE:
+            raise ValueError(f"no initial state {name!r}; the state is {', '.join(_STATE)}")
+        v = float(value)
+        if not np.isfinite(v):
+            raise ValueError(f"initial {name} must be finite, got {value!r}")
+        out[_STATE.index(name)] = wrap_angle(v) if name == "psi" else v
+    return out

@@ -1,13 +1,17 @@
-"""``rovlab mavlink sim``: a MAVLink endpoint that behaves like an ArduSub vehicle, on rovlab's
-plant model (rovlab.sim.vehicle.VehicleSimulation).
+"""``rovlab mavlink sim``: a MAVLink endpoint that behaves like an ArduSub vehicle, on the simulated
+vehicle of a scenario (rovlab.sim.realtime.SimulatedVehicle: the same plant, thrusters, sensors,
+noise, biases, drop-out windows and truth events as the scenario's batch run and the ROS simulators).
 
 What it does, as a stock BlueROV2 running ArduSub would (docs/mavlink.md has the details):
 
 * sends HEARTBEAT (MAV_TYPE_SUBMARINE, ArduPilot autopilot, armed flag, custom_mode = the
-  ArduSub mode number), ATTITUDE (rad, rad/s), SCALED_PRESSURE2 (the external Bar30: press_abs
-  in hPa from the pressure sensor's depth and the water density), VFR_HUD (heading in degrees,
-  alt = -depth), SYS_STATUS, SERVO_OUTPUT_RAW (one servo per thruster in the vehicle file's order,
-  in us) and, with ``local_position``, LOCAL_POSITION_NED (as with a positioning system);
+  ArduSub mode number), ATTITUDE (the IMU's latest heading and yaw-rate samples, rad and rad/s),
+  SCALED_PRESSURE2 (the external Bar30: press_abs in hPa from the pressure sensor's latest depth
+  sample and the true water density), VFR_HUD (heading in degrees, alt = -depth), SYS_STATUS,
+  SERVO_OUTPUT_RAW (one servo per thruster in the vehicle file's order, in us) and, with
+  ``local_position``, LOCAL_POSITION_NED (the true position, as with a positioning system). A
+  sensor's message stops while the sensor sends nothing (a drop-out window of the scenario, or
+  none at all): it resumes with its next sample;
 * arms and disarms on COMMAND_LONG MAV_CMD_COMPONENT_ARM_DISARM and changes mode on
   MAV_CMD_DO_SET_MODE or SET_MODE, each answered by COMMAND_ACK; MANUAL and STABILIZE are
   simulated (identical here: roll and pitch are not modelled), other modes are refused;
@@ -54,27 +58,30 @@ from rovlab.interfaces.mavlink.units import (
     inputs_from_manual_control,
     pressure_hpa,
 )
-from rovlab.params.vehicle import Vehicle
-from rovlab.sim.vehicle import VehicleSimulation
+from rovlab.sim.realtime import SimulatedVehicle, VehicleSample
 
 SIMULATED_MODES = (MODES["MANUAL"], MODES["STABILIZE"])
 _AXES = ("forward", "lateral", "throttle", "yaw")
 _ARM_FORCE_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2 that forces arming/disarming
+_MAX_CATCH_UP_S = 1.0  # real time the simulation catches up in one call; beyond it, it falls behind
+# telemetry stream -> (sensor kind, quantity) of the sample it carries
+_SOURCES = {"attitude": ("imu", "psi"), "pressure": ("pressure", "z")}
 
 
 class ArduSubSim:
     """A simulated ArduSub vehicle on one MAVLink connection. Drive it with :meth:`run` (or call
     :meth:`step` from your own loop); not thread-safe apart from :meth:`stop`."""
 
-    def __init__(self, vehicle: Vehicle, *, connect: str = "udpout:127.0.0.1:14550", seed: int = 0,
-                 depth_m: float = 0.0, heading_rad: float = 0.0, local_position: bool = False,
-                 attitude_hz: float = 25.0, log: Callable[[str], None] | None = None,
-                 sim: VehicleSimulation | None = None) -> None:
+    def __init__(self, sim: SimulatedVehicle, *, connect: str = "udpout:127.0.0.1:14550",
+                 local_position: bool = False, attitude_hz: float = 25.0,
+                 log: Callable[[str], None] | None = None) -> None:
+        """``sim``: the simulated vehicle (its model vehicle is what the autopilot knows: frame, PWM
+        range, mixing; its truth is the water and the thrust). Compile its plant (``sim.compile()``)
+        before: the first step otherwise waits for numba while a ground station waits for us."""
         mu = mavutil()
         self.mav = dialect()
-        self.vehicle = vehicle
-        self.sim = sim if sim is not None else VehicleSimulation(vehicle, depth_m=depth_m, heading_rad=heading_rad,
-                                                                 seed=seed)
+        self.sim = sim
+        self.vehicle = vehicle = sim.prep.vehicle
         self.mixer = Mixer.from_vehicle(vehicle)
         n = len(vehicle.thrusters)
         if n > 16:
@@ -98,6 +105,10 @@ class ArduSubSim:
                                        "refused": 0, "errors": 0}
         self._stop = threading.Event()
         self._t0: float | None = None
+        self.state: VehicleSample = sim.step()  # step 0: the initial state and its samples
+        self.latest: dict[str, tuple[float, float]] = {}  # stream -> (sample, time of the sample [s])
+        self._silent_after = {key: _silence(sim, kind) for key, (kind, _q) in _SOURCES.items()}
+        self._take(self.state)
         pressure = next((s for s in vehicle.sensors if s.kind == "pressure"), None)
         rate = pressure.rate_hz if pressure is not None else 10.0
         self._periods = {"heartbeat": 1.0, "attitude": 1.0 / attitude_hz, "pressure": 1.0 / rate,
@@ -134,8 +145,43 @@ class ArduSubSim:
         drain(self.conn, lambda msg: self._handle(msg, now), self.counts, self._warn_once)  # bounded per call
         self._failsafe(now)
         self._actuate()
-        self.sim.advance(now - self._t0 - self.sim.time)
+        self._advance(now - self._t0)
         self._telemetry(now)
+
+    def _advance(self, elapsed: float) -> None:
+        """Step the simulated vehicle to ``elapsed`` s of real time (whole control periods)."""
+        sim = self.sim
+        behind = elapsed - sim.k * sim.h
+        if behind > _MAX_CATCH_UP_S:  # the process was held up (a debugger, a suspended laptop)
+            skip = behind - _MAX_CATCH_UP_S
+            self._t0 = (self._t0 or 0.0) + skip
+            elapsed -= skip
+            self._warn_once("behind", f"the simulation fell {skip:.1f} s behind real time; it continues from "
+                                      "where it was")
+        while sim.k * sim.h <= elapsed + 1e-9:
+            try:
+                self.state = sim.step()
+            except RuntimeError as exc:  # the plant diverged: say so, hold the last state
+                self._warn_once("diverged", str(exc))
+                self.stop()
+                return
+            self._take(self.state)
+
+    def _take(self, s: VehicleSample) -> None:
+        for sensor, quantity, value in s.samples:
+            for key, (kind, q) in _SOURCES.items():
+                if q == quantity and self.sim.sensor_kind(sensor) == kind:
+                    self.latest[key + "." + q] = (value, s.t)
+        r = next(((v, s.t) for sensor, q, v in s.samples if q == "r" and self.sim.sensor_kind(sensor) == "imu"), None)
+        if r is not None:
+            self.latest["attitude.r"] = r
+
+    def _sample(self, key: str, quantity: str) -> float | None:
+        """The latest sample a stream carries, None while its sensor is silent."""
+        got = self.latest.get(key + "." + quantity)
+        if got is None or self.state.t - got[1] > self._silent_after[key]:
+            return None
+        return got[0]
 
     # -- incoming ----------------------------------------------------------------------------
     def _handle(self, msg: Any, now: float) -> None:
@@ -328,7 +374,7 @@ class ArduSubSim:
         if self.armed and self.mode in SIMULATED_MODES:
             self.sim.set_pwm(self.mixer.pwm_us(self.mixer.outputs(self.inputs)))
         else:
-            self.sim.neutral()
+            self.sim.set_pwm(self.sim.neutral_pwm)
 
     def _telemetry(self, now: float) -> None:
         due = [k for k, t in self._due.items() if now >= t]
@@ -338,38 +384,47 @@ class ArduSubSim:
             return
         mav, out = self.mav, self.conn.mav
         boot_ms = int((now - (self._t0 or now)) * 1000) & 0xFFFFFFFF
-        sim = self.sim
+        x = self.state.truth
         if "heartbeat" in due:
             base = (mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
                     | mav.MAV_MODE_FLAG_STABILIZE_ENABLED | (mav.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0))
             state = (mav.MAV_STATE_CRITICAL if self.failsafe
                      else mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY)
             out.heartbeat_send(mav.MAV_TYPE_SUBMARINE, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base, self.mode, state)
-        if "attitude" in due:
-            out.attitude_send(boot_ms, 0.0, 0.0, sim.heading_sample(), 0.0, 0.0, sim.yaw_rate_sample())
-        if "pressure" in due:
-            v = self.vehicle
-            p = pressure_hpa(sim.pressure_depth(), water_density=v.water_density, gravity=v.gravity,
+        psi = self._sample("attitude", "psi")
+        if "attitude" in due and psi is not None:
+            r = self._sample("attitude", "r")
+            out.attitude_send(boot_ms, 0.0, 0.0, psi, 0.0, 0.0, 0.0 if r is None else r)
+        depth = self._sample("pressure", "z")
+        if "pressure" in due and depth is not None:
+            w = self.sim.prep.truth
+            p = pressure_hpa(depth, water_density=w.water_density, gravity=w.gravity,
                              surface_hpa=self.params["BARO2_GND_PRESS"] / 100.0)
             out.scaled_pressure2_send(boot_ms, p, p - self.params["BARO2_GND_PRESS"] / 100.0, cdeg_c(15.0))
         if "vfr_hud" in due:
             throttle = int(round(50.0 + 50.0 * self.inputs[2]))
-            out.vfr_hud_send(0.0, float(math.hypot(sim.x[4], sim.x[5])), heading_deg(sim.heading), throttle,
-                             -sim.depth, -float(sim.x[6]))
+            out.vfr_hud_send(0.0, math.hypot(x["u"], x["v"]), heading_deg(x["psi"] if psi is None else psi), throttle,
+                             -x["z"], -x["w"])
         if "sys_status" in due:
             bits = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
                     | mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
                     | mav.MAV_SYS_STATUS_AHRS)
             out.sys_status_send(bits, bits, bits, 100, 16000, -1, -1, 0, 0, 0, 0, 0, 0)
         if "servo" in due:
-            pwm = [int(round(p)) for p in sim.pwm_us] + [0] * (16 - sim.pwm_us.size)
+            pwm = [int(round(p)) for p in self.sim.pwm] + [0] * (16 - self.sim.pwm.size)
             out.servo_output_raw_send(int((now - (self._t0 or now)) * 1e6) & 0xFFFFFFFF, 0, *pwm)
         if "local_position" in due and self.local_position:
-            c, s = math.cos(sim.x[3]), math.sin(sim.x[3])
-            vn = c * sim.x[4] - s * sim.x[5]
-            ve = s * sim.x[4] + c * sim.x[5]
-            out.local_position_ned_send(boot_ms, float(sim.x[0]), float(sim.x[1]), float(sim.x[2]), float(vn),
-                                        float(ve), float(sim.x[6]))
+            c, s = math.cos(x["psi"]), math.sin(x["psi"])
+            vn = c * x["u"] - s * x["v"]
+            ve = s * x["u"] + c * x["v"]
+            out.local_position_ned_send(boot_ms, x["x"], x["y"], x["z"], vn, ve, x["w"])
+
+
+def _silence(sim: SimulatedVehicle, kind: str) -> float:
+    """How long after its last sample a sensor of this kind counts as silent [s]: two of its sample
+    periods and one control period (at least 0.25 s)."""
+    rates = [s.rate_hz for s in sim.prep.truth.sensors if s.kind == kind and s.rate_hz]
+    return max(2.0 / max(rates) if rates else 0.0, 0.25) + sim.h
 
 
 def _param_name(raw: Any) -> str:
