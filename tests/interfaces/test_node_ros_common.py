@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from rovlab.interfaces.node import frames
+from rovlab.core import frames
 from rovlab.interfaces.node import ros_common as rc
 from rovlab.interfaces.node.core import NodeCore
 from rovlab.params.design import load_design_config

@@ -24,7 +24,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from rovlab.interfaces.node import frames
+from rovlab.core import frames
 from rovlab.interfaces.node import ros_common as rc
 from rovlab.params.design import DesignConfig
 from rovlab.params.validate import ConfigError, Problem

@@ -36,7 +36,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from rovlab.interfaces.node import frames
+from rovlab.core import frames
 from rovlab.interfaces.node.core import NodeCore, NodeOutput
 
 TOPICS = {"pressure": "pressure", "mocap": "mocap/pose", "imu": "imu", "setpoint": "setpoint",

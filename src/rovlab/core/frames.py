@@ -1,8 +1,9 @@
 """rovlab's NED world / FRD body against ROS's ENU world / FLU body (REP-103, REP-105).
 
-The only place the vehicle node changes frames: inside rovlab everything is NED (x north, y east,
+The one place rovlab changes frames, for the vehicle nodes and for the ROS 2 messages of its
+files (rovlab.io.ros2msg): inside rovlab everything is NED (x north, y east,
 z down; heading psi from north towards east) and FRD (x forward, y starboard, z down); on ROS
-topics the world frames (``map``, ``odom``) are ENU (x east, y north, z up; yaw from east towards
+topics and in ROS bags the world frames (``map``, ``odom``) are ENU (x east, y north, z up; yaw from east towards
 north) and the body frame ``base_link`` is FLU (x forward, y left, z up).
 
 Both changes are a fixed signed permutation, its own inverse:
@@ -13,7 +14,7 @@ Both changes are a fixed signed permutation, its own inverse:
 
 The orientation of FRD in NED, the yaw psi, is the quaternion of FLU in ENU with yaw pi/2 - psi
 (roll and pitch zero in rovlab's 4-DOF model). A covariance C transforms as J C J^T, J the
-block-diagonal signed permutation above. Plain numpy; no ROS import.
+block-diagonal signed permutation above (applied by indexing, so a NaN stays where it is). Plain numpy; no ROS import.
 """
 
 from __future__ import annotations
@@ -28,13 +29,33 @@ POSE_J = np.block([[WORLD, np.zeros((3, 3))], [np.zeros((3, 3)), WORLD]])  # pos
 TWIST_J = np.block([[BODY, np.zeros((3, 3))], [np.zeros((3, 3)), BODY]])  # twist covariance (v, omega) in the body
 
 
+def _signed_permutation(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(index, sign) with J @ v == sign * v[index]: applied by indexing, a NaN (a quantity without
+    a value) stays in its own entry instead of spreading through a matrix product."""
+    return np.argmax(np.abs(J), axis=1), J[np.arange(len(J)), np.argmax(np.abs(J), axis=1)]
+
+
+_WORLD, _BODY, _POSE, _TWIST = (_signed_permutation(J) for J in (WORLD, BODY, POSE_J, TWIST_J))
+
+
+def _vector(perm: tuple[np.ndarray, np.ndarray], v: np.ndarray | list[float] | tuple[float, ...]) -> np.ndarray:
+    index, sign = perm
+    return sign * np.asarray(v, dtype=float)[index]
+
+
+def _matrix(perm: tuple[np.ndarray, np.ndarray], C: np.ndarray) -> np.ndarray:
+    """J C J^T for the signed permutation J."""
+    index, sign = perm
+    return np.outer(sign, sign) * np.asarray(C, dtype=float)[np.ix_(index, index)]
+
+
 def _wrap(a: float) -> float:
     return math.remainder(a, 2.0 * math.pi)
 
 
 def ned_to_enu(p: np.ndarray | list[float] | tuple[float, ...]) -> np.ndarray:
     """A world vector (position, velocity, small rotation) from NED to ENU."""
-    return WORLD @ np.asarray(p, dtype=float)
+    return _vector(_WORLD, p)
 
 
 enu_to_ned = ned_to_enu  # the same permutation both ways
@@ -42,7 +63,7 @@ enu_to_ned = ned_to_enu  # the same permutation both ways
 
 def frd_to_flu(v: np.ndarray | list[float] | tuple[float, ...]) -> np.ndarray:
     """A body vector (velocity, rate, force, moment) from FRD to FLU."""
-    return BODY @ np.asarray(v, dtype=float)
+    return _vector(_BODY, v)
 
 
 flu_to_frd = frd_to_flu
@@ -83,7 +104,7 @@ def quaternion_heading(q: tuple[float, float, float, float] | list[float]) -> fl
 
 def pose_covariance_to_enu(C_ned: np.ndarray) -> np.ndarray:
     """6x6 pose covariance (x, y, z, rotation about x, y, z) from NED world axes to ENU."""
-    return POSE_J @ np.asarray(C_ned, dtype=float) @ POSE_J.T
+    return _matrix(_POSE, C_ned)
 
 
 pose_covariance_to_ned = pose_covariance_to_enu
@@ -91,7 +112,7 @@ pose_covariance_to_ned = pose_covariance_to_enu
 
 def twist_covariance_to_flu(C_frd: np.ndarray) -> np.ndarray:
     """6x6 twist covariance (linear, angular) from FRD body axes to FLU."""
-    return TWIST_J @ np.asarray(C_frd, dtype=float) @ TWIST_J.T
+    return _matrix(_TWIST, C_frd)
 
 
 twist_covariance_to_frd = twist_covariance_to_flu
