@@ -39,7 +39,8 @@ def test_a_reset_starts_a_new_run_and_each_run_gets_its_files(tmp_path, sim_rows
     log.add(messages[:10])  # two rows of the same times again
     paths = log.write(["csv", "mcap"])
     names = sorted(p.name for p in paths)
-    assert names == ["s-events.json", "s-run1.csv", "s-run1.mcap", "s-run2.csv", "s-run2.mcap"]
+    assert names == ["s-events.json", "s-run1.csv", "s-run1.mcap", "s-run1.rovlab.mcap", "s-run2.csv", "s-run2.mcap",
+                     "s-run2.rovlab.mcap"]
     run1, run2 = read_log(tmp_path / "s-run1.csv"), read_log(tmp_path / "s-run2.csv")
     assert len(run1) == 40 and len(run2) == 2
     assert run2.time[0] == 0.0 and "status_z_qualisys" in run1.columns

@@ -13,6 +13,7 @@ import pytest
 from rovlab.core import frames
 from rovlab.interfaces.node import ros_common as rc
 from rovlab.interfaces.node.core import NodeCore
+from rovlab.io import ros2msg
 from rovlab.params.design import load_design_config
 from rovlab.params.vehicle import load_vehicle
 
@@ -89,8 +90,8 @@ def test_odometry_content_from_an_estimate():
     pc, tc = np.array(c["pose_covariance"]).reshape(6, 6), np.array(c["twist_covariance"]).reshape(6, 6)
     assert pc[2, 2] == 0.01 and pc[5, 5] == 0.02 and pc[2, 5] == pc[5, 2] == 0.005  # (-1)(-1): sign kept
     assert tc[2, 2] == 0.03 and tc[5, 5] == 0.04 and tc[2, 5] == 0.007
-    assert pc[0, 0] == pc[1, 1] == pc[3, 3] == pc[4, 4] == rc.UNKNOWN_VARIANCE
-    assert tc[0, 0] == tc[1, 1] == tc[3, 3] == tc[4, 4] == rc.UNKNOWN_VARIANCE
+    assert pc[0, 0] == pc[1, 1] == pc[3, 3] == pc[4, 4] == ros2msg.UNESTIMATED_VARIANCE
+    assert tc[0, 0] == tc[1, 1] == tc[3, 3] == tc[4, 4] == ros2msg.UNESTIMATED_VARIANCE
 
 
 def test_wrench_to_flu():
@@ -190,8 +191,97 @@ def test_recording_is_readable_as_ros2_and_replayable(tmp_path):
             topics=["/rov/odometry"])]
     assert len(msgs) == 30 and msgs[-1].child_frame_id == "base_link"
     assert msgs[-1].pose.pose.position.z == pytest.approx(-1.0, abs=0.05)
-    cols = read_mcap_columns(tmp_path / "n.mcap")
+    cols = read_mcap_columns(tmp_path / "n.mcap")  # the series beside the bag: n.rovlab.mcap
     assert len(cols["time_s"]) == 30 and np.all(np.isfinite(cols["tau_Z"]))
+    assert read_mcap_columns(tmp_path / "n.rovlab.mcap").keys() == cols.keys()
+
+
+def test_the_node_recording_is_a_ros2_bag_rosbags_reads_and_converts(tmp_path):
+    """issue 27, item 8: the recording says it is a ROS 2 bag and is one: only CDR messages with
+    their definitions, read whole by rosbags and converted to a ROS 1 bag and a sqlite3 ROS 2 bag;
+    /tf places the estimate, /tf_static the sensors at their lever arms (REP 105: base_link FLU)."""
+    import subprocess
+    import sys
+
+    from mcap.reader import make_reader
+
+    from rovlab.interfaces.node.record import NodeRecorder
+
+    highlevel = pytest.importorskip("rosbags.highlevel", reason="rosbags (the dev extra) is the independent reader")
+    vehicle = load_vehicle("udrone")
+    core = NodeCore(vehicle, load_design_config("default"), log=lambda m: None)
+    rec = NodeRecorder(tmp_path / "n.mcap", core, namespace="rov")
+    core.set_reference(z=1.0, psi=0.0)
+    t0 = 1.7e9  # ROS time, UNIX seconds
+    for k in range(40):
+        t = t0 + k * 0.1
+        for c in core.channels:
+            core.push(c.sensor, c.quantity, 1.0 + c.offset if c.quantity == "z" else 0.1, t)
+        rec.sample("pressure", t, {"z": 1.0})
+        rec.sample("mocap/pose", t, {"x": 0.0, "y": 0.0, "z": 1.0, "psi": 0.1})
+        for out in core.tick(t):
+            rec.output(out)
+    rec.close()
+    with open(tmp_path / "n.mcap", "rb") as fh:
+        reader = make_reader(fh)
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+        assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
+        assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
+    expected = {"/rov/pressure": 40, "/rov/mocap/pose": 40, "/rov/odometry": 40, "/tf": 40, "/rov/wrench": 40,
+                "/rov/thrusters/pwm_us": 40, "/tf_static": 1}
+
+    def read(path):
+        counts: dict[str, int] = {}
+        msgs: dict[str, list] = {}
+        with highlevel.AnyReader([path]) as r:
+            for conn, _t, raw in r.messages():
+                counts[conn.topic] = counts.get(conn.topic, 0) + 1
+                msgs.setdefault(conn.topic, []).append(r.deserialize(raw, conn.msgtype))
+        return counts, msgs
+
+    counts, msgs = read(tmp_path / "n.mcap")
+    assert counts == expected
+    odo, tf = msgs["/rov/odometry"][-1], msgs["/tf"][-1].transforms[0]
+    assert (tf.header.frame_id, tf.child_frame_id) == ("map", "base_link")
+    assert tf.transform.translation.z == odo.pose.pose.position.z == pytest.approx(-1.0, abs=0.05)
+    static = {t.child_frame_id: t for t in msgs["/tf_static"][0].transforms}
+    assert set(static) == {s.name for s in vehicle.sensors}
+    for s in vehicle.sensors:  # FRD lever arm -> FLU translation
+        tr = static[s.name].transform.translation
+        assert static[s.name].header.frame_id == "base_link"
+        assert [tr.x, tr.y, tr.z] == pytest.approx([s.position[0], -s.position[1], -s.position[2]])
+    assert msgs["/rov/pressure"][0].header.frame_id == core.sensor_of_kind("pressure")
+    for dst, extra in ((tmp_path / "n.bag", []), (tmp_path / "n_sqlite3", ["--dst-storage", "sqlite3"])):
+        subprocess.run([sys.executable, "-m", "rosbags.convert", "--src", str(tmp_path / "n.mcap"), "--dst", str(dst),
+                        *extra], check=True, capture_output=True, timeout=300)
+        assert read(dst)[0] == expected, dst
+
+
+def test_node_and_simulator_odometry_share_one_variance_convention():
+    """The node's Odometry (full covariance of its filter) and the simulator's (the logged
+    variances) of the same estimate: the same diagonal, UNESTIMATED_VARIANCE where nothing is
+    estimated (rovlab.io.ros2msg.odometry_covariances is the one place it is filled)."""
+    from rovlab.io.timeseries import _ros2_messages
+
+    core = NodeCore(load_vehicle("udrone"), load_design_config("default"), log=lambda m: None)
+    core.set_reference(z=1.0, psi=0.0)
+    outs = []
+    for k in range(5):
+        for c in core.channels:
+            core.push(c.sensor, c.quantity, 1.0 + c.offset if c.quantity == "z" else 0.1, k * 0.1)
+        outs += core.tick(k * 0.1)
+    out = outs[-1]
+    node = rc.odometry_content(out)
+    (topic, sim_msg), *_ = _ros2_messages("/rovlab/estimate", 0, out.messages()[0][2], tf=False)
+    assert topic == "/rovlab/odometry/estimate"
+    node_pose, sim_pose = np.array(node["pose_covariance"]).reshape(6, 6), np.array(sim_msg["pose"]["covariance"]).reshape(6, 6)
+    node_twist = np.array(node["twist_covariance"]).reshape(6, 6)
+    sim_twist = np.array(sim_msg["twist"]["covariance"]).reshape(6, 6)
+    np.testing.assert_allclose(np.diag(node_pose), np.diag(sim_pose), rtol=1e-12)
+    np.testing.assert_allclose(np.diag(node_twist), np.diag(sim_twist), rtol=1e-12)
+    assert np.diag(node_pose)[[0, 1, 3, 4]].tolist() == [ros2msg.UNESTIMATED_VARIANCE] * 4
+    assert 0 < node_pose[2, 2] < 1.0 and 0 < node_pose[5, 5] < 1.0
 
 
 def test_rovlab_filter_replays_a_node_recording(tmp_path, capsys):

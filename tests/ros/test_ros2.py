@@ -54,9 +54,21 @@ def test_ros2_node_with_an_independent_peer(ros2):
     # the recording: ROS 2 channels and rovlab's JSON topics, replayable
     from rovlab.io.timeseries import read_mcap_columns
 
-    cols = read_mcap_columns(ros2 / "node.mcap")
+    cols = read_mcap_columns(ros2 / "node.mcap")  # rovlab's series, node.rovlab.mcap beside the bag
     assert {"time_s", "est_z", "var_z", "meas_z_pressure", "tau_Z", "tau_N", "pwm_T1"} <= set(cols)
     assert len(cols["time_s"]) >= 50
+    # the bag: a ROS 2 bag that rosbags reads whole (issue 27, item 8)
+    highlevel = pytest.importorskip("rosbags.highlevel", reason="rosbags (the dev extra) is the independent reader")
+    counts: dict[str, int] = {}
+    last: dict[str, object] = {}
+    with highlevel.AnyReader([ros2 / "node.mcap"]) as reader:
+        for conn, _t, raw in reader.messages():
+            last[conn.topic] = reader.deserialize(raw, conn.msgtype)
+            counts[conn.topic] = counts.get(conn.topic, 0) + 1
+    cov = last["/rov/odometry"].pose.covariance  # type: ignore[attr-defined]
+    assert cov[0] == cov[7] == 1e6 and 0 < cov[14] < 1.0  # x, y not estimated; z estimated
+    assert counts["/rov/odometry"] == counts["/tf"] == counts["/rov/wrench"] == len(cols["time_s"])
+    assert counts["/tf_static"] == 1 and counts["/rov/mocap/pose"] >= 50 and counts["/rov/pressure"] >= 50
 
 
 def test_ros2_sim_and_node_hold_depth_and_heading_like_the_case_study(ros2):

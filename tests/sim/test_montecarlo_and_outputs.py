@@ -63,7 +63,8 @@ def test_simulate_cli_writes_the_contract(tmp_path, capsys):
     assert rows[1 + 250][k] == ""  # t = 25 s: Qualisys lost, no sample
     metrics = json.loads((out / "metrics.json").read_text())
     assert set(metrics) >= {"rms_error", "settling_time_s", "overshoot", "nees", "dropouts"}
-    for name in ("states.png", "errors.png", "biases.png", "control.png", "report.html", "timeseries.mcap"):
+    for name in ("states.png", "errors.png", "biases.png", "control.png", "report.html", "timeseries.mcap",
+                 "timeseries.rovlab.mcap"):
         assert (out / name).stat().st_size > 1000, name
     html = (out / "report.html").read_text()
     assert "data:image/png;base64" in html and "http" not in html.split("<body>")[1][:2000]
@@ -87,7 +88,7 @@ def test_mcap_log_reads_back(tmp_path):
     out = tmp_path / "run"
     assert main(["simulate", "step-process-model", "--out", str(out), "--no-figures"]) == 0
     topics: dict[str, int] = {}
-    with (out / "timeseries.mcap").open("rb") as fh:
+    with (out / "timeseries.rovlab.mcap").open("rb") as fh:  # rovlab's series; timeseries.mcap is the ROS 2 bag
         for _schema, channel, message in make_reader(fh).iter_messages():
             topics[channel.topic] = topics.get(channel.topic, 0) + 1
             if channel.topic == "/rovlab/estimate" and topics[channel.topic] == 1:

@@ -20,7 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         n.add_argument("--mocap-covariance", action="store_true",
                        help="mocap/pose is geometry_msgs/PoseWithCovarianceStamped (default PoseStamped)")
         n.add_argument("--record", default=None, metavar="FILE.mcap",
-                       help="record the node's inputs and outputs to MCAP (ROS 2 schemas)")
+                       help="record the node's inputs and outputs: a ROS 2 bag (MCAP) in FILE.mcap and "
+                            "rovlab's series (JSON) in FILE.rovlab.mcap beside it")
         n.add_argument("--remap", action="append", default=[], metavar="FROM:=TO",
                        help="remap a topic, e.g. mocap/pose:=/qualisys/rov/pose (repeatable)")
         n.set_defaults(func=_cmd_node, ros=ros)

@@ -313,7 +313,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         sections.append({"title": name, "description": f"{result.scenario.description}. {result.scenario.source}.",
                          "metrics": metrics, "figures": figs,
                          "extra": f"seed {result.scenario.seed}; details in {name}/report.html, "
-                                  f"logs in {name}/timeseries.csv and timeseries.mcap"})
+                                  f"logs in {name}/timeseries.csv, timeseries.mcap (ROS 2 bag) and "
+                                  f"timeseries.rovlab.mcap"})
     mc_name = "step-observer-model"
     if args.runs > 1:
         print(f"[{len(cases) + 1}/{len(cases) + 1}] filter consistency: {args.runs} Monte Carlo runs of {mc_name}")

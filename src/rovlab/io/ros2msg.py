@@ -1,173 +1,228 @@
-"""ROS 2 message definitions and builders for logs that ROS 2 tools and Foxglove open as they are.
+"""The ROS 2 messages in rovlab's files and on its nodes' topics: definitions and contents.
 
-The definitions are the standard interfaces (nav_msgs/msg/Odometry, geometry_msgs/msg/WrenchStamped
-with their dependencies) in the concatenated ``ros2msg`` text form MCAP stores as a schema; the
-messages are plain dicts that mcap-ros2-support encodes as CDR.
+Definitions: the standard interfaces rovlab writes (nav_msgs/msg/Odometry,
+geometry_msgs/msg/WrenchStamped, tf2_msgs/msg/TFMessage ...) in the concatenated ``ros2msg`` text
+that MCAP stores as a channel's schema (the form ``ros2 bag record`` writes), built from the field
+lists below by :func:`definition`. Contents: plain dicts with the messages' fields, which
+``mcap_ros2.writer.Writer`` encodes as CDR; the vehicle nodes copy the same contents into rclpy or
+rospy message objects (rovlab.interfaces.node.ros_common).
 
-Frames: rovlab logs stay in its own conventions, named as REP-105 allows for them: the world frame
-``map_ned`` (north-east-down) and the body frame ``base_link_frd`` (forward-right-down). Nothing is
-converted here; a ROS bridge that publishes ENU/FLU converts at its edge.
+Frames and units (REP 103, REP 105): the world frame ``map`` is east-north-up, the body frame
+``base_link`` forward-left-up, SI units and radians; rovlab's NED/FRD values are converted here
+(rovlab.core.frames) and nowhere else in the files.
+
+Covariance of an estimate (:func:`odometry_covariances`, the one place it is filled): the
+estimator's covariance where it estimates a quantity; every other entry of the diagonal -- a
+quantity the estimator does not estimate (x and y for a depth-and-heading filter, roll and pitch,
+which rovlab's 4-DOF model holds at 0) -- carries :data:`UNESTIMATED_VARIANCE`, with zeros off the
+diagonal. A large variance is a valid covariance that says "no information" to whatever fuses or
+draws it; 0 would claim the opposite (or, read as REP 145 and sensor_msgs read it, "covariance
+unknown" for the whole matrix), and REP 145's -1 marks a whole 3x3 block of an Imu as absent, not
+one axis of a 6x6 pose. The truth of a simulation is exact and carries a zero covariance.
 """
 
 from __future__ import annotations
 
 import math
-import struct
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-WORLD_FRAME = "map_ned"
-BODY_FRAME = "base_link_frd"
+import numpy as np
 
+from rovlab.core import frames
+
+WORLD_FRAME = "map"
+BODY_FRAME = "base_link"
+UNESTIMATED_VARIANCE = 1e6  # [m^2, rad^2, (m/s)^2, (rad/s)^2] on the diagonal for what is not estimated
+Vector = Sequence[float] | np.ndarray
+
+# --------------------------------------------------------------------------------------------
+# Definitions: each message's own fields, as in its .msg file (without comments); the nested
+# messages' definitions are appended by definition(), as ROS 2's MCAP writer does
+# --------------------------------------------------------------------------------------------
+
+_FIELDS = {
+    "builtin_interfaces/Time": "int32 sec\nuint32 nanosec\n",
+    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
+    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+    "geometry_msgs/Pose": "Point position\nQuaternion orientation\n",
+    "geometry_msgs/PoseStamped": "std_msgs/Header header\nPose pose\n",
+    "geometry_msgs/PoseWithCovariance": "Pose pose\nfloat64[36] covariance\n",
+    "geometry_msgs/Twist": "Vector3 linear\nVector3 angular\n",
+    "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
+    "geometry_msgs/Wrench": "Vector3 force\nVector3 torque\n",
+    "geometry_msgs/WrenchStamped": "std_msgs/Header header\nWrench wrench\n",
+    "geometry_msgs/Transform": "Vector3 translation\nQuaternion rotation\n",
+    "geometry_msgs/TransformStamped": "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
+    "nav_msgs/Odometry": ("std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
+                          "geometry_msgs/TwistWithCovariance twist\n"),
+    "sensor_msgs/FluidPressure": "std_msgs/Header header\nfloat64 fluid_pressure\nfloat64 variance\n",
+    "std_msgs/MultiArrayDimension": "string label\nuint32 size\nuint32 stride\n",
+    "std_msgs/MultiArrayLayout": "MultiArrayDimension[] dim\nuint32 data_offset\n",
+    "std_msgs/Float64MultiArray": "MultiArrayLayout layout\nfloat64[] data\n",
+    "tf2_msgs/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
+}
+_PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32", "uint32",
+               "int64", "uint64", "string", "wstring"}
 _SEP = "=" * 80 + "\n"
-_TIME = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
-_HEADER = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
-_VECTOR3 = "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
+
+
+def _nested(name: str) -> list[str]:
+    """The message types a message's fields refer to, in the order of the fields (package-relative
+    names resolved against the message's own package)."""
+    package = name.split("/")[0]
+    out = []
+    for line in _FIELDS[name].splitlines():
+        typ = line.split()[0].split("[")[0]
+        if typ in _PRIMITIVES:
+            continue
+        out.append(typ if "/" in typ else f"{package}/{typ}")
+    return out
+
+
+def definition(datatype: str) -> str:
+    """The ``ros2msg`` schema text of a message type ("nav_msgs/msg/Odometry"): its fields, then
+    each message it uses once, depth first, after a line of 80 '=' and ``MSG: package/Name``."""
+    name = datatype.replace("/msg/", "/")
+    seen: list[str] = []
+
+    def walk(n: str) -> None:
+        for sub in _nested(n):
+            if sub not in seen:
+                seen.append(sub)
+                walk(sub)
+
+    walk(name)
+    return _FIELDS[name] + "".join(f"{_SEP}MSG: {sub}\n{_FIELDS[sub]}" for sub in seen)
+
 
 ODOMETRY = "nav_msgs/msg/Odometry"
-ODOMETRY_DEF = (
-    "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
-    "geometry_msgs/TwistWithCovariance twist\n"
-    + _SEP + _HEADER + _SEP + _TIME
-    + _SEP + "MSG: geometry_msgs/PoseWithCovariance\nPose pose\nfloat64[36] covariance\n"
-    + _SEP + "MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n"
-    + _SEP + "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n"
-    + _SEP + "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
-    + _SEP + "MSG: geometry_msgs/TwistWithCovariance\nTwist twist\nfloat64[36] covariance\n"
-    + _SEP + "MSG: geometry_msgs/Twist\nVector3 linear\nVector3 angular\n"
-    + _SEP + _VECTOR3
-)
-
 WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
-WRENCH_STAMPED_DEF = (
-    "std_msgs/Header header\ngeometry_msgs/Wrench wrench\n"
-    + _SEP + _HEADER + _SEP + _TIME
-    + _SEP + "MSG: geometry_msgs/Wrench\nVector3 force\nVector3 torque\n"
-    + _SEP + _VECTOR3
-)
-
 FLUID_PRESSURE = "sensor_msgs/msg/FluidPressure"
-FLUID_PRESSURE_DEF = "std_msgs/Header header\nfloat64 fluid_pressure\nfloat64 variance\n" + _SEP + _HEADER + _SEP + _TIME
-
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
-POSE_STAMPED_DEF = (
-    "std_msgs/Header header\ngeometry_msgs/Pose pose\n"
-    + _SEP + _HEADER + _SEP + _TIME
-    + _SEP + "MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n"
-    + _SEP + "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n"
-    + _SEP + "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
-)
-
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
-FLOAT64_MULTI_ARRAY_DEF = (
-    "std_msgs/MultiArrayLayout layout\nfloat64[] data\n"
-    + _SEP + "MSG: std_msgs/MultiArrayLayout\nstd_msgs/MultiArrayDimension[] dim\nuint32 data_offset\n"
-    + _SEP + "MSG: std_msgs/MultiArrayDimension\nstring label\nuint32 size\nuint32 stride\n"
-)
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+DEFINITIONS = {t: definition(t) for t in (ODOMETRY, WRENCH_STAMPED, FLUID_PRESSURE, POSE_STAMPED,
+                                          FLOAT64_MULTI_ARRAY, TF_MESSAGE)}
 
-DEFINITIONS = {ODOMETRY: ODOMETRY_DEF, WRENCH_STAMPED: WRENCH_STAMPED_DEF, FLUID_PRESSURE: FLUID_PRESSURE_DEF,
-               POSE_STAMPED: POSE_STAMPED_DEF, FLOAT64_MULTI_ARRAY: FLOAT64_MULTI_ARRAY_DEF}
+# --------------------------------------------------------------------------------------------
+# Contents
+# --------------------------------------------------------------------------------------------
+
+# where each TRUTH quantity sits in Odometry: (block, index) with block 0 = pose (x y z rx ry rz, NED
+# world axes before conversion), 1 = twist (vx vy vz wx wy wz, FRD body axes before conversion)
+_ODOM_SLOT = {"x": (0, 0), "y": (0, 1), "z": (0, 2), "psi": (0, 5), "u": (1, 0), "v": (1, 1), "w": (1, 2),
+              "r": (1, 5)}
 
 
 def stamp(t_ns: int) -> dict[str, int]:
-    return {"sec": int(t_ns // 1_000_000_000), "nanosec": int(t_ns % 1_000_000_000)}
+    """builtin_interfaces/Time of a time in integer nanoseconds."""
+    sec, nanosec = divmod(int(t_ns), 1_000_000_000)
+    return {"sec": sec, "nanosec": nanosec}
 
 
-def _num(v: Any, default: float = 0.0) -> float:
-    v = float(v) if v is not None else math.nan
-    return v if math.isfinite(v) else default
+def stamp_s(t_s: float) -> dict[str, int]:
+    """builtin_interfaces/Time of a time in seconds (rounded to the nanosecond)."""
+    return stamp(int(round(t_s * 1e9)))
 
 
-def _odometry_values(state: Mapping[str, float], variance: Mapping[str, float] | None) -> list[float]:
-    """The 85 float64 of nav_msgs/Odometry after its header, in message order: position (3),
-    orientation (4), pose covariance (36), linear (3) and angular (3) velocity, twist covariance (36)."""
-    var = variance or {}
-    psi = _num(state.get("psi"))
-    pose_cov = [0.0] * 36
-    twist_cov = [0.0] * 36
-    for i, key in enumerate(("x", "y", "z", None, None, "psi")):
-        if key is not None:
-            pose_cov[7 * i] = max(_num(var.get(key)), 0.0)
-    for i, key in enumerate(("u", "v", "w", None, None, "r")):
-        if key is not None:
-            twist_cov[7 * i] = max(_num(var.get(key)), 0.0)
-    # yaw psi about the NED z axis (down), roll = pitch = 0
-    return [_num(state.get("x")), _num(state.get("y")), _num(state.get("z")),
-            0.0, 0.0, math.sin(psi / 2), math.cos(psi / 2), *pose_cov,
-            _num(state.get("u")), _num(state.get("v")), _num(state.get("w")), 0.0, 0.0, _num(state.get("r")),
-            *twist_cov]
+def odometry_covariances(P: np.ndarray | None, states: Sequence[str]) -> tuple[list[float], list[float]]:
+    """The pose covariance (map, ENU) and twist covariance (base_link, FLU) of nav_msgs/Odometry,
+    row-major lists of 36, from an estimate's covariance ``P`` over ``states`` (TRUTH names: x, y,
+    z, psi, u, v, w, r; others, such as biases, are not in Odometry). Every diagonal entry of a
+    quantity not in ``states`` is :data:`UNESTIMATED_VARIANCE`. ``P`` None: an exact state (a
+    simulation's truth, a set-point): all zeros."""
+    if P is None:
+        return [0.0] * 36, [0.0] * 36
+    blocks = [np.diag(np.full(6, UNESTIMATED_VARIANCE)), np.diag(np.full(6, UNESTIMATED_VARIANCE))]
+    slots = [(_ODOM_SLOT.get(q), i) for i, q in enumerate(states)]
+    for a, i in slots:
+        for b, j in slots:
+            if a is not None and b is not None and a[0] == b[0]:
+                blocks[a[0]][a[1], b[1]] = P[i, j]
+    pose = frames.pose_covariance_to_enu(blocks[0])
+    twist = frames.twist_covariance_to_flu(blocks[1])
+    return pose.ravel().tolist(), twist.ravel().tolist()
 
 
-def odometry(t_ns: int, state: Mapping[str, float], variance: Mapping[str, float] | None = None) -> dict[str, Any]:
-    """nav_msgs/Odometry of a rovlab state (any of x, y, z, psi in map_ned; u, v, w, r in
-    base_link_frd); the covariance diagonal from ``variance`` (0 where not estimated)."""
-    v = _odometry_values(state, variance)
+def odometry_content(nav: Mapping[str, float], P: np.ndarray | None = None,
+                     states: Sequence[str] = ()) -> dict[str, Any]:
+    """Position (ENU), orientation quaternion (base_link in ENU), linear and angular velocity
+    (FLU) and the two covariances (:func:`odometry_covariances`) of a state in rovlab's NED/FRD
+    (``nav``: TRUTH names -> values; a missing quantity is 0)."""
+    pos = frames.ned_to_enu([nav.get("x", 0.0), nav.get("y", 0.0), nav.get("z", 0.0)])
+    quat = frames.heading_quaternion(nav.get("psi", 0.0))
+    lin = frames.frd_to_flu([nav.get("u", 0.0), nav.get("v", 0.0), nav.get("w", 0.0)])
+    ang = frames.frd_to_flu([0.0, 0.0, nav.get("r", 0.0)])
+    pose_cov, twist_cov = odometry_covariances(P, states)
+    return {"position": pos.tolist(), "orientation": list(quat), "linear": lin.tolist(), "angular": ang.tolist(),
+            "pose_covariance": pose_cov, "twist_covariance": twist_cov}
+
+
+def odometry(t_ns: int, content: Mapping[str, Any], *, frame: str = WORLD_FRAME,
+             child: str = BODY_FRAME) -> dict[str, Any]:
+    """nav_msgs/Odometry of an :func:`odometry_content`."""
     return {
-        "header": {"stamp": stamp(t_ns), "frame_id": WORLD_FRAME},
-        "child_frame_id": BODY_FRAME,
-        "pose": {"pose": {"position": dict(zip("xyz", v[0:3])), "orientation": dict(zip("xyzw", v[3:7]))},
-                 "covariance": v[7:43]},
-        "twist": {"twist": {"linear": dict(zip("xyz", v[43:46])), "angular": dict(zip("xyz", v[46:49]))},
-                  "covariance": v[49:85]},
+        "header": {"stamp": stamp(t_ns), "frame_id": frame},
+        "child_frame_id": child,
+        "pose": {"pose": {"position": dict(zip("xyz", content["position"])),
+                          "orientation": dict(zip("xyzw", content["orientation"]))},
+                 "covariance": list(content["pose_covariance"])},
+        "twist": {"twist": {"linear": dict(zip("xyz", content["linear"])),
+                            "angular": dict(zip("xyz", content["angular"]))},
+                  "covariance": list(content["twist_covariance"])},
     }
 
 
-def _wrench_values(tau: Mapping[str, float]) -> list[float]:
-    """force (3) and torque (3) of geometry_msgs/Wrench from a body wrench {X, Y, Z, N}."""
-    return [_num(tau.get("X")), _num(tau.get("Y")), _num(tau.get("Z")), 0.0, 0.0, _num(tau.get("N"))]
+def wrench_flu(tau: Vector) -> tuple[list[float], list[float]]:
+    """Force and torque in base_link (FLU) of rovlab's wrench [X, Y, Z, N] (FRD)."""
+    force = frames.frd_to_flu([tau[0], tau[1], tau[2]])
+    torque = frames.frd_to_flu([0.0, 0.0, tau[3]])
+    return force.tolist(), torque.tolist()
 
 
-def wrench_stamped(t_ns: int, tau: Mapping[str, float]) -> dict[str, Any]:
-    """geometry_msgs/WrenchStamped of a body wrench {X, Y, Z, N} (missing entries 0)."""
-    v = _wrench_values(tau)
-    return {"header": {"stamp": stamp(t_ns), "frame_id": BODY_FRAME},
-            "wrench": {"force": dict(zip("xyz", v[0:3])), "torque": dict(zip("xyz", v[3:6]))}}
+def wrench_stamped(t_ns: int, tau: Vector, *, frame: str = BODY_FRAME) -> dict[str, Any]:
+    """geometry_msgs/WrenchStamped of rovlab's wrench [X, Y, Z, N] (FRD), in base_link (FLU)."""
+    force, torque = wrench_flu(tau)
+    return {"header": {"stamp": stamp(t_ns), "frame_id": frame},
+            "wrench": {"force": dict(zip("xyz", force)), "torque": dict(zip("xyz", torque))}}
 
 
-# --------------------------------------------------------------------------------------------
-# CDR: the two messages of a simulation log encoded directly (OMG XCDR1 little endian, what ROS 2
-# puts on the wire and MCAP stores; DDS-XTypes 1.3, sec. 7.4.3.5), checked byte for byte against
-# mcap-ros2-support's general encoder in the tests, at ~1/30 of its cost. Alignment of a
-# primitive is its size, counted from the end of the 4-byte encapsulation header.
-# --------------------------------------------------------------------------------------------
-
-_ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, options 0
-
-
-def _cdr_string(s: str, offset: int) -> bytes:
-    """A CDR string at ``offset``: padding to 4, uint32 length with the terminating NUL, bytes, NUL."""
-    raw = s.encode() + b"\x00"
-    return b"\x00" * (-offset % 4) + struct.pack("<I", len(raw)) + raw
+def transform(t_ns: int, parent: str, child: str, translation: Vector,
+              rotation: Vector = (0.0, 0.0, 0.0, 1.0)) -> dict[str, Any]:
+    """geometry_msgs/TransformStamped: the pose of ``child`` in ``parent`` (ROS axes; rotation
+    as a quaternion x, y, z, w)."""
+    return {"header": {"stamp": stamp(t_ns), "frame_id": parent}, "child_frame_id": child,
+            "transform": {"translation": dict(zip("xyz", (float(v) for v in translation))),
+                          "rotation": dict(zip("xyzw", (float(v) for v in rotation)))}}
 
 
-class _Stamped:
-    """Encoder of a message [Header header, <strings>, <n float64>] with constant strings."""
-
-    def __init__(self, strings: tuple[str, ...], n_doubles: int) -> None:
-        body = b""
-        offset = 8  # after the stamp (int32 sec, uint32 nanosec)
-        for s in strings:
-            part = _cdr_string(s, offset)
-            body += part
-            offset += len(part)
-        self._strings = body + b"\x00" * (-offset % 8)
-        self._doubles = struct.Struct(f"<{n_doubles}d")
-        self._stamp = struct.Struct("<iI")
-
-    def __call__(self, t_ns: int, values: list[float]) -> bytes:
-        sec, nanosec = divmod(int(t_ns), 1_000_000_000)
-        return _ENCAPSULATION + self._stamp.pack(sec, nanosec) + self._strings + self._doubles.pack(*values)
+def body_transform(t_ns: int, content: Mapping[str, Any], *, frame: str = WORLD_FRAME,
+                   child: str = BODY_FRAME) -> dict[str, Any] | None:
+    """The transform ``frame`` -> ``child`` of an :func:`odometry_content` (what /tf carries for
+    a viewer); None when the pose is not finite (tf refuses NaN)."""
+    values = [*content["position"], *content["orientation"]]
+    if not all(math.isfinite(v) for v in values):
+        return None
+    return transform(t_ns, frame, child, content["position"], content["orientation"])
 
 
-_ODOMETRY_CDR = _Stamped((WORLD_FRAME, BODY_FRAME), 85)
-_WRENCH_CDR = _Stamped((BODY_FRAME,), 6)
+def sensor_transforms(t_ns: int, sensors: Iterable[tuple[str, Vector]], *,
+                      body: str = BODY_FRAME) -> list[dict[str, Any]]:
+    """The fixed transforms base_link -> each sensor's frame (named after the sensor) from its
+    lever arm in rovlab's body frame (FRD, from the vehicle file), for /tf_static."""
+    return [transform(t_ns, body, name, frames.frd_to_flu(np.asarray(position, dtype=float))) for name, position in sensors]
 
 
-def odometry_cdr(t_ns: int, state: Mapping[str, float], variance: Mapping[str, float] | None = None) -> bytes:
-    """:func:`odometry` encoded as CDR (the bytes of a ROS 2 nav_msgs/Odometry message)."""
-    return _ODOMETRY_CDR(t_ns, _odometry_values(state, variance))
+def tf_message(transforms: Iterable[dict[str, Any] | None]) -> dict[str, Any]:
+    """tf2_msgs/TFMessage of the transforms given (None entries left out)."""
+    return {"transforms": [t for t in transforms if t is not None]}
 
 
-def wrench_stamped_cdr(t_ns: int, tau: Mapping[str, float]) -> bytes:
-    """:func:`wrench_stamped` encoded as CDR (geometry_msgs/WrenchStamped)."""
-    return _WRENCH_CDR(t_ns, _wrench_values(tau))
+def pwm_array(thrusters: Sequence[str], pwm_us: Vector) -> dict[str, Any]:
+    """std_msgs/Float64MultiArray: one PWM [us] per thruster, labelled with the thrusters' names."""
+    n = len(thrusters)
+    return {"layout": {"dim": [{"label": ",".join(thrusters), "size": n, "stride": n}], "data_offset": 0},
+            "data": [float(v) for v in pwm_us]}

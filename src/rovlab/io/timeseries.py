@@ -1,9 +1,15 @@
-"""Time-series logs of a run (simulated or real) as MCAP, for Foxglove and ROS 2 tools.
+"""Time-series logs of a run (simulated or real) as MCAP, for ROS 2 tools, Foxglove and replay.
 
 A log is an ordered mapping column name -> 1-D array of equal length, with ``time_s`` first (its
-CSV form is written by :func:`rovlab.io.logs.write_csv`). The MCAP file holds the same rows as JSON
-messages on a few topics (the message layout of :mod:`rovlab.io.messages`), readable by Foxglove
-and other robotics tools.
+CSV form is written by :func:`rovlab.io.logs.write_csv`). A run's MCAP is two files:
+
+* ``RUN.mcap``, a ROS 2 bag: only ROS 2 messages (CDR, ``ros2msg`` definitions, profile
+  ``ros2``) -- odometry of the truth and of the estimate, the wrench, /tf -- which rosbags,
+  ``ros2 bag`` and Foxglove open as they are;
+* ``RUN.rovlab.mcap`` (:func:`series_path`), the same rows as JSON messages on rovlab's topics
+  (:mod:`rovlab.io.messages`): every column, including what no standard ROS message holds
+  (sensor status, measurements per sensor, controller state), for Foxglove's plots,
+  ``rovlab filter`` and :func:`read_mcap_columns`.
 """
 
 from __future__ import annotations
@@ -21,16 +27,33 @@ from rovlab.core.files import atomic_open
 from rovlab.io import ros2msg
 from rovlab.io.messages import TOPICS, rows_to_messages
 
+SERIES_SUFFIX = ".rovlab.mcap"
+
+
+def series_path(path: str | Path) -> Path:
+    """Where rovlab's series (JSON topics) of a ROS 2 bag ``RUN.mcap`` go: ``RUN.rovlab.mcap``
+    beside it."""
+    path = Path(path)
+    stem = path.name[:-len(".mcap")] if path.name.endswith(".mcap") else path.name
+    return path.with_name(stem + SERIES_SUFFIX)
+
 
 def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata: Mapping[str, str] | None = None,
                start_time_s: float | None = None) -> Path:
-    """Write the rows to MCAP (requires `mcap`): every column as JSON messages on the topics of
-    rovlab.io.messages (JSON Schema declared: Foxglove plots any field), and the poses and
-    velocities as ROS 2 nav_msgs/Odometry
-    (/rovlab/odometry/truth, /rovlab/odometry/estimate with the filter's variances) and the
-    wrench as geometry_msgs/WrenchStamped (/rovlab/wrench), which Foxglove's 3D panel and ROS 2
-    tools open without configuration (CDR encoded by rovlab.io.ros2msg). Log times are
-    wall-clock: ``start_time_s`` (UNIX seconds of the run's start; default now) + time_s."""
+    """A run's MCAP files (requires `mcap` and `mcap-ros2-support`): the ROS 2 bag at ``path``
+    (:func:`write_ros2_bag`) and rovlab's series beside it (:func:`series_path`,
+    :func:`write_series_mcap`). Log times are wall-clock: ``start_time_s`` (UNIX seconds of the
+    run's start; default now) + time_s. Returns ``path``."""
+    start = time.time() if start_time_s is None else float(start_time_s)
+    series = series_path(path)
+    write_series_mcap(series, columns, metadata={**(metadata or {}), "ros2_bag": Path(path).name}, start_time_s=start)
+    return write_ros2_bag(path, columns, metadata={**(metadata or {}), "series": series.name}, start_time_s=start)
+
+
+def write_series_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *,
+                      metadata: Mapping[str, str] | None = None, start_time_s: float | None = None) -> Path:
+    """Every column as JSON messages on the topics of rovlab.io.messages (JSON Schema declared:
+    Foxglove plots any field; ``rovlab filter`` and :func:`read_mcap_columns` read them back)."""
     try:
         from mcap.writer import CompressionType, Writer
     except ImportError as exc:  # pragma: no cover - optional extra
@@ -45,21 +68,12 @@ def write_mcap(path: str | Path, columns: Mapping[str, np.ndarray], *, metadata:
             sid = writer.register_schema(name="rovlab." + topic.rsplit("/", 1)[-1], encoding="jsonschema",
                                          data=json.dumps(schema).encode())
             channel_ids[topic] = writer.register_channel(topic=topic, message_encoding="json", schema_id=sid)
-        for topic, datatype in ROS2_TOPICS.items():
-            sid = writer.register_schema(name=datatype, encoding="ros2msg", data=ros2msg.DEFINITIONS[datatype].encode())
-            channel_ids[topic] = writer.register_channel(topic=topic, message_encoding="cdr", schema_id=sid)
-        meta = {"start_time_unix_s": f"{t0_ns / 1e9:.9f}", "world_frame": ros2msg.WORLD_FRAME,
-                "body_frame": ros2msg.BODY_FRAME, **{k: str(v) for k, v in (metadata or {}).items()}}
-        writer.add_metadata("rovlab", meta)
-        seq = 0
-        for topic, t, msg in rows_to_messages(columns):
+        writer.add_metadata("rovlab", {"start_time_unix_s": f"{t0_ns / 1e9:.9f}",
+                                       **{k: str(v) for k, v in (metadata or {}).items()}})
+        for seq, (topic, t, msg) in enumerate(rows_to_messages(columns)):
             stamp = t0_ns + int(round(t * 1e9))
             writer.add_message(channel_ids[topic], log_time=stamp, data=json.dumps(msg).encode(),
                                publish_time=stamp, sequence=seq)
-            seq += 1
-            for ros_topic, data in _ros2_messages(topic, stamp, msg):
-                writer.add_message(channel_ids[ros_topic], log_time=stamp, data=data, publish_time=stamp, sequence=seq)
-                seq += 1
         writer.finish()
     return path
 
@@ -68,17 +82,65 @@ ROS2_TOPICS = {
     "/rovlab/odometry/truth": ros2msg.ODOMETRY,
     "/rovlab/odometry/estimate": ros2msg.ODOMETRY,
     "/rovlab/wrench": ros2msg.WRENCH_STAMPED,
+    "/tf": ros2msg.TF_MESSAGE,
 }
 
 
-def _ros2_messages(topic: str, stamp: int, msg: Mapping[str, Any]):
-    """The ROS 2 messages (CDR bytes) that go with one rovlab message."""
-    if topic == "/rovlab/truth":
-        yield "/rovlab/odometry/truth", ros2msg.odometry_cdr(stamp, msg["state"])
-    elif topic == "/rovlab/estimate":
-        yield "/rovlab/odometry/estimate", ros2msg.odometry_cdr(stamp, msg["state"], msg.get("variance"))
+def write_ros2_bag(path: str | Path, columns: Mapping[str, np.ndarray], *,
+                   metadata: Mapping[str, str] | None = None, start_time_s: float | None = None) -> Path:
+    """A ROS 2 bag in MCAP (profile ``ros2``, CDR messages with their ``ros2msg`` definitions:
+    rosbags, ``ros2 bag`` and Foxglove open it) of a run's poses, velocities and wrench, in ROS's
+    frames (rovlab.io.ros2msg: ``map`` ENU, ``base_link`` FLU): nav_msgs/Odometry on
+    /rovlab/odometry/truth (exact: zero covariance) and /rovlab/odometry/estimate (the filter's
+    variances; UNESTIMATED_VARIANCE for what it does not estimate), geometry_msgs/WrenchStamped on
+    /rovlab/wrench (the achieved wrench) and tf2_msgs/TFMessage on /tf (map -> base_link from the
+    estimate, or from the truth for a log without one)."""
+    try:
+        from mcap.writer import CompressionType
+        from mcap_ros2.writer import Writer
+    except ImportError as exc:  # pragma: no cover - optional extra
+        raise RuntimeError("writing a ROS 2 bag needs mcap and mcap-ros2-support: pip install 'rovlab[log]'") from exc
+    t0_ns = int(round((time.time() if start_time_s is None else float(start_time_s)) * 1e9))
+    path = Path(path)
+    tf_from = "/rovlab/estimate" if any(k.startswith("est_") for k in columns) else "/rovlab/truth"
+    with atomic_open(path, "wb") as fh:
+        writer = Writer(fh, compression=CompressionType.NONE)
+        schemas = {t: writer.register_msgdef(t, ros2msg.DEFINITIONS[t]) for t in set(ROS2_TOPICS.values())}
+        writer.add_metadata("rovlab", {"start_time_unix_s": f"{t0_ns / 1e9:.9f}", "world_frame": ros2msg.WORLD_FRAME,
+                                       "body_frame": ros2msg.BODY_FRAME,
+                                       **{k: str(v) for k, v in (metadata or {}).items()}})
+        seq = 0
+        for topic, t, msg in rows_to_messages(columns):
+            stamp = t0_ns + int(round(t * 1e9))
+            for ros_topic, ros_msg in _ros2_messages(topic, stamp, msg, tf=topic == tf_from):
+                writer.write_message(ros_topic, schemas[ROS2_TOPICS[ros_topic]], ros_msg, log_time=stamp,
+                                     publish_time=stamp, sequence=seq)
+                seq += 1
+        writer.finish()
+    return path
+
+
+def _values(group: Mapping[str, Any] | None) -> dict[str, float]:
+    """A message's numbers with null (NaN in the log) as NaN."""
+    return {k: math.nan if v is None else float(v) for k, v in (group or {}).items()}
+
+
+def _ros2_messages(topic: str, stamp: int, msg: Mapping[str, Any], *, tf: bool):
+    """The ROS 2 messages (dicts) that go with one rovlab message."""
+    if topic in ("/rovlab/truth", "/rovlab/estimate"):
+        state = _values(msg.get("state"))
+        if topic == "/rovlab/truth":
+            content = ros2msg.odometry_content(state)
+        else:
+            variance = _values(msg.get("variance"))
+            states = tuple(variance)
+            content = ros2msg.odometry_content(state, np.diag([variance[s] for s in states]), states)
+        yield "/rovlab/odometry/" + topic.rsplit("/", 1)[-1], ros2msg.odometry(stamp, content)
+        if tf and (transform := ros2msg.body_transform(stamp, content)) is not None:
+            yield "/tf", ros2msg.tf_message([transform])
     elif topic == "/rovlab/command" and msg.get("tau"):
-        yield "/rovlab/wrench", ros2msg.wrench_stamped_cdr(stamp, msg["tau"])
+        tau = _values(msg["tau"])
+        yield "/rovlab/wrench", ros2msg.wrench_stamped(stamp, [tau.get(k, 0.0) for k in "XYZN"])
 
 
 class McapStream:
@@ -203,6 +265,21 @@ def read_mcap_json(path: str | Path, *, prefix: str = "/") -> Any:
             yield channel.topic, message.log_time / 1e9, json.loads(message.data)
 
 
+def _json_topics(path: str | Path) -> bool:
+    """Whether an MCAP file has JSON channels (from its summary; True when it has none to read,
+    so that the caller reads the file itself and reports what is wrong with it)."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as fh:
+            summary = make_reader(fh).get_summary()
+    except Exception:  # noqa: BLE001 - a damaged file: its own reader says why
+        return True
+    if summary is None:
+        return True
+    return any(c.message_encoding == "json" for c in summary.channels.values())
+
+
 # JSON topic -> (field, column prefix) of the columns it carries (the inverse of rows_to_messages)
 _COLUMNS_OF = {
     "/rovlab/truth": (("state", "true_"),),
@@ -217,8 +294,13 @@ def read_mcap_columns(path: str | Path) -> dict[str, np.ndarray]:
     """The numeric time-series columns (time_s, true_*, est_*, var_*, meas_*, ref_*, tau_*,
     pwm_*, ctrl_*) of an MCAP log with rovlab's JSON topics -- written by :func:`write_mcap` or
     recorded by the vehicle node -- one row per message time; NaN where a row has no value
-    (e.g. no sample of a sensor). ConfigError for a file that is not such a log."""
+    (e.g. no sample of a sensor). Given a ROS 2 bag of rovlab's (no JSON topics), its series file
+    beside it (:func:`series_path`) is read. ConfigError for a file that is not such a log."""
     from rovlab.params.validate import ConfigError, Problem
+
+    companion = series_path(path)
+    if companion != Path(path) and companion.exists() and Path(path).exists() and not _json_topics(path):
+        path = companion
 
     try:
         from mcap.reader import make_reader
@@ -244,7 +326,8 @@ def read_mcap_columns(path: str | Path) -> dict[str, np.ndarray]:
                                    "an MCAP log with rovlab's JSON topics")], "log") from None
     if not rows:
         raise ConfigError([Problem(str(path), "", "no rovlab messages",
-                                   "an MCAP log with rovlab's topics (" + ", ".join(_COLUMNS_OF) + ")")], "log")
+                                   "an MCAP log with rovlab's topics (" + ", ".join(_COLUMNS_OF) + "), or a ROS 2 bag of "
+                                   f"rovlab's with its series file {series_path(path).name} beside it")], "log")
     times = sorted(rows)
     out: dict[str, np.ndarray] = {"time_s": np.array(times)}
     for name in names:

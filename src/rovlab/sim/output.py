@@ -1,4 +1,5 @@
-"""Writing a run's results into a folder: timeseries.csv, timeseries.mcap, metrics.json, the PNG
+"""Writing a run's results into a folder: timeseries.csv, timeseries.mcap (a ROS 2 bag) and
+timeseries.rovlab.mcap (rovlab's series), metrics.json, the PNG
 figures and report.html. Whatever was computed is written even if a later step fails (a missing
 optional extra such as matplotlib only skips the figures, with a note)."""
 
@@ -15,7 +16,7 @@ import numpy as np
 from rovlab.io.logs import write_csv
 from rovlab.io.messages import order_columns
 from rovlab.io.report import write_figures, write_nees_figure, write_report_html
-from rovlab.io.timeseries import write_mcap
+from rovlab.io.timeseries import series_path, write_mcap
 from rovlab.sim.runner import SimResult
 
 
@@ -66,6 +67,7 @@ def write_run(out_dir: str | Path, result: SimResult, metrics: Mapping[str, Any]
             written["timeseries.mcap"] = write_mcap(out / "timeseries.mcap", cols, metadata={
                 "scenario": result.scenario.name, "seed": str(result.scenario.seed)},
                 start_time_s=result.meta.get("start_time_unix_s"))
+            written["timeseries.rovlab.mcap"] = series_path(out / "timeseries.mcap")
         except RuntimeError as exc:
             notes.append(str(exc))
     figs: list[Path] = []

@@ -23,7 +23,7 @@ import numpy as np
 from rovlab.core.files import atomic_write_text
 from rovlab.io.logs import write_csv
 from rovlab.io.messages import SENSOR_STATUS, order_columns, status_words
-from rovlab.io.timeseries import write_mcap
+from rovlab.io.timeseries import series_path, write_mcap
 
 _STATUS_CODE = {name: float(code) for code, name in SENSOR_STATUS.items()}
 # topic -> (field of the message, column prefix)
@@ -138,7 +138,10 @@ class SessionLog:
         out: list[Path] = []
         for i in runs:
             name = self.stem if len(runs) == 1 and i == 1 else f"{self.stem}-run{i}"
-            out.extend(self.folder / f"{name}.{fmt}" for fmt in formats)
+            for fmt in formats:
+                out.append(self.folder / f"{name}.{fmt}")
+                if fmt == "mcap":  # a ROS 2 bag and rovlab's series beside it
+                    out.append(series_path(out[-1]))
         return out
 
     def write(self, formats: Iterable[str] = ("csv", "mcap"), *, metadata: dict[str, str] | None = None
@@ -162,6 +165,7 @@ class SessionLog:
                 elif fmt == "mcap":
                     meta = {"run": str(i), **(metadata or {})}
                     written.append(write_mcap(path, cols, metadata=meta, start_time_s=run.started))
+                    written.append(series_path(path))
                 else:
                     raise ValueError(f"unknown log format {fmt!r}; expected csv or mcap")
         if self.events or written:

@@ -1,22 +1,26 @@
-"""Recording a vehicle node's inputs and outputs to MCAP, for Foxglove, ROS 2 tools and replay.
+"""Recording a vehicle node's inputs and outputs to MCAP, for ROS 2 tools, Foxglove and replay.
 
-Two views of the same run in one file:
+Two files of the same run (rovlab.io.timeseries.series_path names the second):
 
-* ROS 2 messages (CDR, ``ros2msg`` schemas) on the node's own topics, as they are on the wire
-  (ENU/FLU, REP-103/105): ``pressure`` (sensor_msgs/FluidPressure), ``mocap/pose``
+* ``RUN.mcap``, a ROS 2 bag (MCAP profile ``ros2``, every channel CDR with its ``ros2msg``
+  definition): the node's own topics as they are on the wire (ENU/FLU, REP 103/105):
+  ``pressure`` (sensor_msgs/FluidPressure, frame the pressure sensor), ``mocap/pose``
   (geometry_msgs/PoseStamped), ``odometry`` (nav_msgs/Odometry with the filter's covariance),
-  ``wrench`` (geometry_msgs/WrenchStamped) and ``thrusters/pwm_us`` (std_msgs/Float64MultiArray);
-* rovlab's JSON topics (rovlab.io.messages: /rovlab/estimate, /rovlab/measurement,
-  /rovlab/reference, /rovlab/command), the layout of the simulator's logs, which
-  ``rovlab filter`` replays and the HMI reads.
+  ``wrench`` (geometry_msgs/WrenchStamped) and ``thrusters/pwm_us`` (std_msgs/Float64MultiArray),
+  plus what a viewer needs to place the vehicle: ``/tf`` (tf2_msgs/TFMessage, map -> base_link
+  from the estimate) and ``/tf_static`` (base_link -> each sensor of the vehicle file at its lever
+  arm). The node itself does not broadcast tf; the recording adds it;
+* ``RUN.rovlab.mcap``, rovlab's JSON topics (rovlab.io.messages: /rovlab/estimate,
+  /rovlab/measurement, /rovlab/reference, /rovlab/command), the layout of the simulator's logs,
+  which ``rovlab filter`` replays and the HMI reads (sensor status, innovations, controller state:
+  what no standard ROS message holds).
 
 Messages are written as they come (chunked, so a crash loses at most the last chunk); :meth:`close`
-finishes the file and is called on SIGINT / SIGTERM by the adapters.
+finishes both files and is called on SIGINT / SIGTERM by the adapters.
 """
 
 from __future__ import annotations
 
-import json
 import threading
 from pathlib import Path
 from typing import Any
@@ -24,107 +28,106 @@ from typing import Any
 from rovlab.interfaces.node import ros_common as rc
 from rovlab.interfaces.node.core import NodeCore, NodeOutput
 from rovlab.io import ros2msg
-from rovlab.io.messages import TOPICS
 
 _ROS2 = {"pressure": ros2msg.FLUID_PRESSURE, "mocap/pose": ros2msg.POSE_STAMPED, "odometry": ros2msg.ODOMETRY,
          "wrench": ros2msg.WRENCH_STAMPED, "thrusters/pwm_us": ros2msg.FLOAT64_MULTI_ARRAY}
+_TF = {"/tf": ros2msg.TF_MESSAGE, "/tf_static": ros2msg.TF_MESSAGE}  # global, as tf2 uses them
 
 
-def _stamp(seconds: float) -> dict[str, int]:
-    ns = int(round(seconds * 1e9))
-    return ros2msg.stamp(ns)
+def _ns(t_s: float) -> int:
+    return int(round(t_s * 1e9))
 
 
 class NodeRecorder:
-    """An MCAP file the node writes its inputs and outputs to (thread-safe; see the module)."""
+    """The node's ROS 2 bag and its rovlab series file (thread-safe; see the module)."""
 
     def __init__(self, path: str | Path, core: NodeCore, *, namespace: str = "") -> None:
         try:
-            from mcap.writer import Writer
-            from mcap_ros2._dynamic import serialize_dynamic
+            from mcap.writer import CompressionType
+            from mcap_ros2.writer import Writer
         except ImportError as exc:
             raise RuntimeError("recording needs mcap and mcap-ros2-support: pip install 'rovlab[log]'") from exc
+        from rovlab.io.timeseries import McapStream, series_path
+
         self.path = Path(path)
+        self.series_path = series_path(self.path)
         self.core = core
         self._lock = threading.Lock()
-        self._fh = open(self.path, "wb")  # noqa: SIM115 - closed by close()
-        self._w = Writer(self._fh, chunk_size=64 * 1024)
-        self._w.start(profile="ros2", library="rovlab node")
-        self._seq = 0
-        self._ch: dict[str, int] = {}
-        self._enc: dict[str, Any] = {}
-        ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
-        for topic, datatype in _ROS2.items():
-            text = ros2msg.DEFINITIONS[datatype]
-            sid = self._w.register_schema(name=datatype, encoding="ros2msg", data=text.encode())
-            self._ch[topic] = self._w.register_channel(topic=f"{ns}/{topic}", message_encoding="cdr", schema_id=sid)
-            self._enc[topic] = serialize_dynamic(datatype, text)[datatype]
-        for topic, schema in TOPICS.items():
-            sid = self._w.register_schema(name="rovlab." + topic.rsplit("/", 1)[-1], encoding="jsonschema",
-                                          data=json.dumps(schema).encode())
-            self._ch[topic] = self._w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
         v = core.vehicle
-        self._w.add_metadata("rovlab", {"vehicle": v.name, "config": core.config.name, "sample_time_s": str(core.h),
-                                        "channels": ",".join(c.name for c in core.channels),
-                                        "thrusters": ",".join(core.thrusters), "world_frame": rc.WORLD_FRAME,
-                                        "body_frame": rc.BODY_FRAME})
+        meta = {"vehicle": v.name, "config": core.config.name, "sample_time_s": str(core.h),
+                "channels": ",".join(c.name for c in core.channels), "thrusters": ",".join(core.thrusters),
+                "world_frame": rc.WORLD_FRAME, "body_frame": rc.BODY_FRAME}
+        self._fh = open(self.path, "wb")  # noqa: SIM115 - closed by close()
+        self._bag = Writer(self._fh, chunk_size=64 * 1024, compression=CompressionType.NONE)
+        self._bag.add_metadata("rovlab", {**meta, "series": self.series_path.name})
+        self._series = McapStream(self.series_path, metadata={**meta, "ros2_bag": self.path.name},
+                                  chunk_size=64 * 1024)
+        prefix = "/" + namespace.strip("/") if namespace.strip("/") else ""
+        schemas = {t: self._bag.register_msgdef(t, ros2msg.DEFINITIONS[t]) for t in {*_ROS2.values(), *_TF.values()}}
+        self._topics = {topic: (f"{prefix}/{topic}", schemas[datatype]) for topic, datatype in _ROS2.items()}
+        self._topics.update({topic: (topic, schemas[datatype]) for topic, datatype in _TF.items()})
+        self._pressure_frame = core.sensor_of_kind("pressure") or "pressure"
+        self._sensors = [(s.name, s.position) for s in v.sensors]
+        self._seq = 0
         self.closed = False
 
-    def _add(self, topic: str, t_s: float, data: bytes) -> None:
-        ns = int(round(t_s * 1e9))
-        with self._lock:
-            if self.closed:
-                return
-            self._w.add_message(self._ch[topic], log_time=ns, publish_time=ns, data=data, sequence=self._seq)
-            self._seq += 1
+    def _add(self, topic: str, t_s: float, msg: dict[str, Any]) -> None:
+        """One ROS 2 message (under the lock)."""
+        ns = _ns(t_s)
+        if self._seq == 0:  # the sensors' fixed frames, once, with the first message's time
+            name, schema = self._topics["/tf_static"]
+            self._bag.write_message(name, schema, ros2msg.tf_message(ros2msg.sensor_transforms(ns, self._sensors)),
+                                    log_time=ns, publish_time=ns, sequence=0)
+            self._seq = 1
+        name, schema = self._topics[topic]
+        self._bag.write_message(name, schema, msg, log_time=ns, publish_time=ns, sequence=self._seq)
+        self._seq += 1
 
     def sample(self, topic: str, stamp: float, samples: dict[str, float]) -> None:
         """An input as the node understood it (NED samples of a sensor topic), re-encoded as the
         ROS 2 message of that topic (pressure, mocap/pose; other inputs are not recorded)."""
         if topic == "pressure" and "z" in samples:
             v = self.core.vehicle
-            msg = {"header": {"stamp": _stamp(stamp), "frame_id": "pressure"},
-                   "fluid_pressure": rc.pressure_from_depth(samples["z"], rho=v.water_density, g=v.gravity),
-                   "variance": 0.0}
+            msg: dict[str, Any] = {
+                "header": {"stamp": ros2msg.stamp_s(stamp), "frame_id": self._pressure_frame},
+                "fluid_pressure": rc.pressure_from_depth(samples["z"], rho=v.water_density, g=v.gravity),
+                "variance": 0.0}  # 0: unknown (sensor_msgs/FluidPressure); the node does not read it
         elif topic == "mocap/pose" and "z" in samples and "psi" in samples:
-            c = rc.odometry_content(nav=samples)
-            p, q = c["position"], c["orientation"]
-            msg = {"header": {"stamp": _stamp(stamp), "frame_id": rc.WORLD_FRAME},
-                   "pose": {"position": {"x": p[0], "y": p[1], "z": p[2]},
-                            "orientation": {"x": q[0], "y": q[1], "z": q[2], "w": q[3]}}}
+            c = ros2msg.odometry_content(samples)
+            msg = {"header": {"stamp": ros2msg.stamp_s(stamp), "frame_id": rc.WORLD_FRAME},
+                   "pose": {"position": dict(zip("xyz", c["position"])),
+                            "orientation": dict(zip("xyzw", c["orientation"]))}}
         else:
             return
-        self._add(topic, stamp, self._enc[topic](msg))
+        with self._lock:
+            if not self.closed:
+                self._add(topic, stamp, msg)
 
     def output(self, out: NodeOutput) -> None:
-        """One control step: odometry, wrench, PWM (ROS 2) and rovlab's JSON messages."""
+        """One control step: odometry, /tf, wrench, PWM (ROS 2) and rovlab's JSON messages."""
+        ns = _ns(out.stamp)
         c = rc.odometry_content(out)
-        p, q, lin, ang = c["position"], c["orientation"], c["linear"], c["angular"]
-        hdr = {"stamp": _stamp(out.stamp), "frame_id": rc.WORLD_FRAME}
-        odom = {"header": hdr, "child_frame_id": rc.BODY_FRAME,
-                "pose": {"pose": {"position": dict(zip("xyz", p)), "orientation": dict(zip("xyzw", q))},
-                         "covariance": c["pose_covariance"]},
-                "twist": {"twist": {"linear": dict(zip("xyz", lin)), "angular": dict(zip("xyz", ang))},
-                          "covariance": c["twist_covariance"]}}
-        self._add("odometry", out.stamp, self._enc["odometry"](odom))
-        force, torque = rc.wrench_flu(out.tau)
-        wrench = {"header": {"stamp": _stamp(out.stamp), "frame_id": rc.BODY_FRAME},
-                  "wrench": {"force": dict(zip("xyz", force)), "torque": dict(zip("xyz", torque))}}
-        self._add("wrench", out.stamp, self._enc["wrench"](wrench))
-        n = len(out.thrusters)
-        pwm = {"layout": {"dim": [{"label": ",".join(out.thrusters), "size": n, "stride": n}], "data_offset": 0},
-               "data": [float(v) for v in out.pwm_us]}
-        self._add("thrusters/pwm_us", out.stamp, self._enc["thrusters/pwm_us"](pwm))
-        for topic, _t, msg in out.messages():
-            self._add(topic, out.stamp, json.dumps(msg).encode())
+        tf = ros2msg.body_transform(ns, c)  # None for a non-finite pose (tf refuses NaN)
+        messages = [("odometry", ros2msg.odometry(ns, c, frame=rc.WORLD_FRAME, child=rc.BODY_FRAME)),
+                    *([("/tf", ros2msg.tf_message([tf]))] if tf is not None else []),
+                    ("wrench", ros2msg.wrench_stamped(ns, out.tau, frame=rc.BODY_FRAME)),
+                    ("thrusters/pwm_us", ros2msg.pwm_array(out.thrusters, out.pwm_us))]
+        with self._lock:
+            if self.closed:
+                return
+            for topic, msg in messages:
+                self._add(topic, out.stamp, msg)
+            for topic, _t, jmsg in out.messages():
+                self._series.write(topic, out.stamp, jmsg)
 
     def close(self) -> None:
-        """Finish the file (summary, index); safe to call twice."""
+        """Finish both files (summary, index); safe to call twice."""
         with self._lock:
             if self.closed:
                 return
             self.closed = True
             try:
-                self._w.finish()
+                self._bag.finish()
             finally:
                 self._fh.close()
+                self._series.close()

@@ -183,7 +183,7 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
     if record:
         from rovlab.interfaces.node.record import NodeRecorder
 
-        recorder = NodeRecorder(record, core)
+        recorder = NodeRecorder(record, core, namespace=namespace)
     rclpy.init(args=_ros_args(remaps), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     vn = VehicleNode(core, table, namespace=namespace, mocap_covariance=mocap_covariance, recorder=recorder)
     vn.info(f"rovlab node up: vehicle {core.vehicle.name}, configuration {core.config.name}, h = {core.h:g} s, "

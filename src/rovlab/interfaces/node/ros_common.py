@@ -38,18 +38,14 @@ import numpy as np
 
 from rovlab.core import frames
 from rovlab.interfaces.node.core import NodeCore, NodeOutput
+from rovlab.io import ros2msg
 
 TOPICS = {"pressure": "pressure", "mocap": "mocap/pose", "imu": "imu", "setpoint": "setpoint",
           "odometry": "odometry", "wrench": "wrench", "pwm": "thrusters/pwm_us", "diagnostics": "diagnostics",
           "truth": "truth/odometry", "messages": "rovlab/messages"}
-WORLD_FRAME = "map"
-BODY_FRAME = "base_link"
-UNKNOWN_VARIANCE = 1e6  # on the diagonal of quantities the filter does not estimate (x, y, roll, pitch ...)
+WORLD_FRAME = ros2msg.WORLD_FRAME
+BODY_FRAME = ros2msg.BODY_FRAME
 SURFACE_PRESSURE_PA = 101325.0
-# where each TRUTH quantity sits in Odometry: (block, index) with block 0 = pose (x y z rx ry rz, NED
-# world axes before conversion), 1 = twist (vx vy vz wx wy wz, FRD body axes before conversion)
-_ODOM_SLOT = {"x": (0, 0), "y": (0, 1), "z": (0, 2), "psi": (0, 5), "u": (1, 0), "v": (1, 1), "w": (1, 2),
-              "r": (1, 5)}
 # diagnostic_msgs/DiagnosticStatus levels
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 
@@ -66,30 +62,15 @@ def odometry_content(out: NodeOutput | None = None, *, nav: Mapping[str, float] 
                      P: np.ndarray | None = None, states: tuple[str, ...] = ()) -> dict[str, Any]:
     """Position (ENU), orientation quaternion (base_link in ENU), linear and angular velocity
     (FLU) and the two 6x6 covariances (row-major lists of 36) of an estimate -- from a node output,
-    or from ``nav`` (TRUTH names -> values) with an optional covariance P over ``states``."""
+    or from ``nav`` (TRUTH names -> values) with an optional covariance P over ``states``; the
+    covariance convention is rovlab.io.ros2msg's (UNESTIMATED_VARIANCE for what is not estimated,
+    zeros for an exact state)."""
     if out is not None:
         nav = {q: float(out.nav[i]) for i, q in enumerate(("x", "y", "z", "psi", "u", "v", "w", "r"))}
         estimated = dict(zip(out.states, out.estimated))
         P, states = out.P, tuple(estimated[s] for s in out.states)
     assert nav is not None
-    pos = frames.ned_to_enu([nav.get("x", 0.0), nav.get("y", 0.0), nav.get("z", 0.0)])
-    quat = frames.heading_quaternion(nav.get("psi", 0.0))
-    lin = frames.frd_to_flu([nav.get("u", 0.0), nav.get("v", 0.0), nav.get("w", 0.0)])
-    ang = frames.frd_to_flu([0.0, 0.0, nav.get("r", 0.0)])
-    blocks = [np.diag(np.full(6, UNKNOWN_VARIANCE)), np.diag(np.full(6, UNKNOWN_VARIANCE))]
-    if P is not None:
-        slots = [(_ODOM_SLOT.get(q), i) for i, q in enumerate(states)]
-        for a, i in slots:
-            for b, j in slots:
-                if a is not None and b is not None and a[0] == b[0]:
-                    blocks[a[0]][a[1], b[1]] = P[i, j]
-    else:
-        for block in blocks:
-            block[:] = 0.0
-    pose_cov = frames.pose_covariance_to_enu(blocks[0])
-    twist_cov = frames.twist_covariance_to_flu(blocks[1])
-    return {"position": pos.tolist(), "orientation": list(quat), "linear": lin.tolist(), "angular": ang.tolist(),
-            "pose_covariance": pose_cov.ravel().tolist(), "twist_covariance": twist_cov.ravel().tolist()}
+    return ros2msg.odometry_content(nav, P, states)
 
 
 def fill_odometry(msg: Any, content: Mapping[str, Any], *, frame: str = WORLD_FRAME, child: str = BODY_FRAME) -> Any:
@@ -107,11 +88,7 @@ def fill_odometry(msg: Any, content: Mapping[str, Any], *, frame: str = WORLD_FR
     return msg
 
 
-def wrench_flu(tau: np.ndarray) -> tuple[list[float], list[float]]:
-    """Force and torque in base_link (FLU) of rovlab's wrench [X, Y, Z, N] (FRD)."""
-    force = frames.frd_to_flu([tau[0], tau[1], tau[2]])
-    torque = frames.frd_to_flu([0.0, 0.0, tau[3]])
-    return force.tolist(), torque.tolist()
+wrench_flu = ros2msg.wrench_flu
 
 
 def fill_wrench(msg: Any, tau: np.ndarray, *, frame: str = BODY_FRAME) -> Any:
