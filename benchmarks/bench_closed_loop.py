@@ -26,8 +26,9 @@ from rovlab.models import kinetics as kin  # noqa: E402
 from rovlab.params import load_vehicle  # noqa: E402
 from rovlab.sim.montecarlo import run_many  # noqa: E402
 from rovlab.sim.plant import process_advance  # noqa: E402
+from rovlab.sim.prepare import prepare  # noqa: E402
 from rovlab.sim.reference import run_python  # noqa: E402
-from rovlab.sim.runner import prepare, run_prepared  # noqa: E402
+from rovlab.sim.runner import run_prepared  # noqa: E402
 from rovlab.sim.scenario import load_scenario, load_scenario_data  # noqa: E402
 
 

@@ -59,7 +59,8 @@ def loop_rate() -> float:
     """Vehicle-steps per second of the compiled loop alone, in this process, on one core: 16 runs
     one at a time (the loop loaded from numba's cache beforehand), best of 7."""
     from rovlab.sim.montecarlo import Campaign
-    from rovlab.sim.runner import Simulation, reseed
+    from rovlab.sim.prepare import reseed
+    from rovlab.sim.runner import Simulation
     from rovlab.sim.scenario import load_scenario_data
 
     data, file = load_scenario_data(SCENARIO)

@@ -95,7 +95,8 @@ def test_a_users_numba_disable_jit_is_honoured(tmp_path):
     (rovlab neither compiles nor says it does)."""
     code = """
 import json
-from rovlab.sim.runner import prepare, run_prepared
+from rovlab.sim.prepare import prepare
+from rovlab.sim.runner import run_prepared
 from rovlab.sim.scenario import load_scenario
 import numba
 r = run_prepared(prepare(load_scenario("step-observer-model", seed=3)))
@@ -105,7 +106,8 @@ print(json.dumps({"dispatcher": hasattr(__import__("rovlab.sim.loop", fromlist=[
     res = _python(code, tmp_path, {"NUMBA_DISABLE_JIT": "1"})
     assert res.returncode == 0, res.stderr
     out = json.loads(res.stdout)
-    from rovlab.sim.runner import prepare, run_prepared
+    from rovlab.sim.prepare import prepare
+    from rovlab.sim.runner import run_prepared
     from rovlab.sim.scenario import load_scenario
 
     compiled = run_prepared(prepare(load_scenario("step-observer-model", seed=3)))

@@ -315,10 +315,14 @@ def test_designs_that_cannot_work_are_refused(udrone, changes, key, expected):
 
 
 def test_reference_model_is_checked_against_the_thrusters(udrone):
-    """A 2 rad/s reference model for a 1 m step would need far more than uDrone's ~30 N down."""
+    """A 2 rad/s reference model for a 1 m step would need far more than uDrone's ~30 N down. The
+    check is MRAC's own declaration (ComponentInfo.check), and making a design runs it."""
     from rovlab.allocation.solvers import Allocator
-    from rovlab.sim.runner import check_heave_capacity
+    from rovlab.core.components import component
+    from rovlab.sim.designs import make_design
 
+    check_heave_capacity = component("controller", "mrac").check
+    assert check_heave_capacity is mrac.check_heave_capacity
     ok = mrac.build(udrone, _config({}))
     check_heave_capacity(ok, Allocator(udrone), "cfg.toml")  # the packaged design fits
     fast = mrac.build(udrone, _config({"bandwidth": 2.0, "max_step": 1.0}))
@@ -328,6 +332,9 @@ def test_reference_model_is_checked_against_the_thrusters(udrone):
         check_heave_capacity(fast, Allocator(udrone), "cfg.toml")
     p = info.value.problems[0]
     assert p.key == "mrac.bandwidth" and "the thrusters give" in p.expected and p.file == "cfg.toml"
+    with pytest.raises(ConfigError, match="mrac.bandwidth"):
+        make_design(udrone, _config({"bandwidth": 2.0, "max_step": 1.0}), plant="process", plant_step=0.01,
+                    controller="mrac")
 
 
 def test_heave_force_needed_for_a_slow_step_is_the_buoyancy():

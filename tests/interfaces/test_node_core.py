@@ -12,7 +12,8 @@ from rovlab.interfaces.node.core import NodeCore
 from rovlab.params.design import design_config_from_dict, load_design_config, packaged_config_path
 from rovlab.params.validate import ConfigError, read_toml
 from rovlab.params.vehicle import load_vehicle
-from rovlab.sim.runner import prepare, run_prepared
+from rovlab.sim.prepare import prepare
+from rovlab.sim.runner import run_prepared
 from rovlab.sim.scenario import load_scenario
 
 

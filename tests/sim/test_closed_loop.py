@@ -16,8 +16,10 @@ from scipy.integrate import solve_ivp
 from rovlab.models import kinetics as kin
 from rovlab.params.design import design_config_from_dict, packaged_config_path
 from rovlab.params.validate import read_toml
+from rovlab.sim.prepare import prepare
 from rovlab.sim.reference import run_python
-from rovlab.sim.runner import prepare, run_prepared, simulate, summarise
+from rovlab.sim.results import summarise
+from rovlab.sim.runner import run_prepared, simulate
 from rovlab.sim.scenario import load_scenario, packaged_scenario_names
 
 

@@ -25,7 +25,8 @@ from rovlab.params.design import design_config_from_dict, packaged_config_path
 from rovlab.params.validate import ConfigError, read_toml
 from rovlab.sim.live import LiveSimulation
 from rovlab.sim.montecarlo import run_many
-from rovlab.sim.runner import PlantDiverged, Simulation, first_rows, prepare, run_prepared
+from rovlab.sim.prepare import first_rows, prepare
+from rovlab.sim.runner import PlantDiverged, Simulation, run_prepared
 from rovlab.sim.scenario import load_scenario, load_scenario_data
 
 
@@ -248,7 +249,7 @@ def test_actuators_skip_the_real_thrust_only_where_nothing_feels_it():
     really give (make_actuators(real=False)); the process plant keeps it. With the real thrust
     skipped, tau_real is the achieved wrench; the achieved wrench and the PWM are the same."""
     from rovlab.sim.actuators import actuate
-    from rovlab.sim.runner import prepare
+    from rovlab.sim.prepare import prepare
     from rovlab.sim.scenario import load_scenario
 
     assert prepare(load_scenario("step-process-model")).actuators.real
@@ -286,3 +287,21 @@ def test_no_compiled_function_in_sim_takes_more_than_15_parameters():
     assert "rovlab.sim.loop.run_loop" in checked and "rovlab.sim.step.control_step" in checked
     too_many = {k: v for k, v in checked.items() if v > 15}
     assert not too_many, too_many
+
+
+def test_the_observer_plant_comes_from_an_estimator_that_offers_its_model():
+    """plant = "observer" simulates an estimator's own linear model (Sandøy 2016, sec. 5.3: the
+    observer-model case study). The KF declares it (ComponentInfo.observer_model); the EKF does not,
+    and a scenario asking for both is refused by name, saying which estimators would do."""
+    from rovlab.core.components import component
+
+    assert component("estimator", "kf").observer_model is not None
+    assert component("estimator", "ekf").observer_model is None
+    data, file = load_scenario_data("step-observer-model")
+    prepare(data, file=file)  # the packaged observer-model case: kf
+    data, file = load_scenario_data("dp-station-keeping")  # ekf + dp
+    prepare(data, file=file)
+    with pytest.raises(ConfigError) as info:
+        prepare({**data, "plant": "observer"}, file=file)
+    p = info.value.problems[0]
+    assert p.key == "plant" and "estimator 'ekf' does not offer" in p.expected and "that do: kf" in p.expected

@@ -16,7 +16,9 @@ from rovlab.params.design import design_config_from_dict, load_design_config
 from rovlab.params.validate import ConfigError, read_toml
 from rovlab.params.vehicle import load_vehicle
 from rovlab.sim.montecarlo import run_many, summarise_runs
-from rovlab.sim.runner import prepare, run_prepared, summarise
+from rovlab.sim.prepare import prepare
+from rovlab.sim.results import summarise
+from rovlab.sim.runner import run_prepared
 from rovlab.sim.scenario import load_scenario_data, resolve_scenario_path
 
 SEED = 4242

@@ -10,7 +10,8 @@ import pytest
 
 from rovlab.interfaces.cli import main
 from rovlab.sim.montecarlo import run_many, summarise_runs
-from rovlab.sim.runner import simulate, summarise
+from rovlab.sim.results import summarise
+from rovlab.sim.runner import simulate
 from rovlab.sim.scenario import load_scenario_data
 
 CONTRACT = ["time_s", "true_z", "true_psi", "true_w", "true_r", "est_z", "est_psi", "est_w", "est_r", "est_b_w",

@@ -12,8 +12,11 @@ import numpy as np
 import pytest
 
 from rovlab.interfaces.cli import main
+from rovlab.sim.designs import DesignBook
 from rovlab.sim.montecarlo import Campaign, run_many
-from rovlab.sim.runner import DesignBook, prepare, reseed, run_prepared, summarise
+from rovlab.sim.prepare import prepare, reseed
+from rovlab.sim.results import summarise
+from rovlab.sim.runner import run_prepared
 from rovlab.sim.scenario import has_distributions, load_scenario_data
 
 

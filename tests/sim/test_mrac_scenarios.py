@@ -18,7 +18,8 @@ import pytest
 from rovlab.interfaces.cli import main
 from rovlab.params.validate import ConfigError
 from rovlab.sim.compare import compare, reference_model_response, table
-from rovlab.sim.runner import disturbances, prepare, run_prepared
+from rovlab.sim.prepare import disturbances, prepare
+from rovlab.sim.runner import run_prepared
 from rovlab.sim.scenario import load_scenario, load_scenario_data
 
 HEAVE = ("heave-buoyancy-step", "heave-payload", "heave-tether")

@@ -21,7 +21,8 @@ from rovlab.estimation.fusion import (
 from rovlab.params.design import design_config_from_dict, packaged_config_path
 from rovlab.params.validate import read_toml
 from rovlab.sim import metrics as mx
-from rovlab.sim.runner import prepare, run_prepared
+from rovlab.sim.prepare import prepare
+from rovlab.sim.runner import run_prepared
 from rovlab.sim.scenario import load_scenario
 
 H = 0.1

@@ -36,6 +36,18 @@ and Motion Control, Wiley:
 
 State (logged as ctrl_<name>): the reference model (eta_d, eta_d', eta_d''), the NED integral,
 the last NED error and a started flag.
+
+Its table in the design file (read by this module with rovlab.params.validate.TableReader)::
+
+    [dp]                                   # optional: the DP controller (controller = "dp"; rovlab.control.dp)
+    source = "..."
+    bandwidth = { x = 0.6, y = 0.6, z = 0.6, psi = 1.5 }        # closed-loop omega_n [rad/s]
+    damping = 1.0                          # zeta of the pole placement
+    integral_ratio = 0.1                   # K_i = ratio * omega_n * K_p
+    reference_bandwidth = { x = 0.4, y = 0.4, z = 0.4, psi = 0.5 }   # third-order reference model
+    reference_damping = 1.0
+    max_speed = { x = 0.15, y = 0.15, z = 0.15, psi_deg_s = 20.0 }  # reference-model speed limits
+    anti_windup = 1.0                      # back-calculation gain k_t = anti_windup * omega_n (0 = off)
 """
 
 from __future__ import annotations
@@ -62,17 +74,19 @@ from rovlab.core.components import (
     NAV_Y,
     NAV_Z,
     REF_PSI,
+    REFERENCE,
     ComponentInfo,
     ControllerSpec,
     register_component,
     register_controller,
 )
 from rovlab.models import kinetics as kin
-from rovlab.params.design import DP_AXES, DesignConfig, per_key
+from rovlab.params.design import DesignConfig, per_key
 from rovlab.params.validate import ConfigError, Problem, TableReader
 from rovlab.params.vehicle import Vehicle
 
 _DEG = math.pi / 180.0
+DP_AXES = REFERENCE  # x, y, z, psi: the axes the DP law holds (keys of the [dp] tables)
 
 
 @dataclass(frozen=True, eq=False)

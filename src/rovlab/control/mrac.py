@@ -57,7 +57,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -413,7 +413,23 @@ def read_mrac_table(t: TableReader) -> MRACConfig:
                       gain=gain, initial=initial, bounds=bounds, source=source, given=True)
 
 
+def check_heave_capacity(spec: ControllerSpec, alloc: Any, where: str) -> None:
+    """The heave force the reference model takes (``heave_force_needed`` = (down, up) [N]) must come
+    from the thrusters (allocation with K = M = 0); ConfigError naming the [mrac] keys otherwise."""
+    down, up = (float(f) for f in spec.model.heave_force_needed)
+    down_cap = float(alloc.allocate(np.array([0.0, 0.0, 1e6, 0.0])).achieved[2])
+    up_cap = float(alloc.allocate(np.array([0.0, 0.0, -1e6, 0.0])).achieved[2])
+    if down > down_cap or up < up_cap:
+        cfg = spec.model.config
+        raise ConfigError([Problem(where, "mrac.bandwidth", cfg.bandwidth,
+                                   f"a reference model the thrusters can follow: a {cfg.max_step:g} m depth step "
+                                   f"(mrac.max_step) with bandwidth {cfg.bandwidth:g} rad/s and damping "
+                                   f"{cfg.damping:g} takes {down:.1f} N down / {up:.1f} N on the model (holding its "
+                                   f"net weight), the thrusters give {down_cap:.1f} N down / {up_cap:.1f} N; lower "
+                                   "the bandwidth or max_step")], "filter configuration")
+
+
 register_component(ComponentInfo(
     "mrac", "controller", build,
     description="model-reference adaptive heave control with LQR heading (Sandøy 2016, thesis description, task 7)",
-    parse_table=read_mrac_table, default_table=MRACConfig))
+    parse_table=read_mrac_table, default_table=MRACConfig, check=check_heave_capacity))

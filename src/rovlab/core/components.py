@@ -288,6 +288,14 @@ class ComponentInfo:
     ``default_table()`` gives the value a file without the table gets; the design reads it as
     ``config.table(name)``. An estimator names the quantities a measurement may give it
     (``measurable``, e.g. z, psi, w, r).
+
+    ``check(spec, allocator, where)``, if given, is called with the built spec and the vehicle's
+    allocation (rovlab.allocation.solvers.Allocator) when a design is made: it raises ConfigError
+    (file ``where``, the key of its table) when the vehicle's thrusters cannot do what the design
+    asks (MRAC: the heave force of its reference model). ``observer_model(spec)``, if given, makes
+    an estimator's own linear model usable as a scenario's observer plant (plant = "observer"):
+    the continuous (A, B, E, W) of its six states [z, w, b_w, psi, r, b_r] (the depth-and-heading
+    KF's, Sandøy 2016 sec. 5.1).
     """
 
     name: str
@@ -297,6 +305,8 @@ class ComponentInfo:
     parse_table: Callable[[Any], Any] | None = None
     default_table: Callable[[], Any] | None = None
     measurable: tuple[str, ...] = ()
+    check: Callable[[Any, Any, str], None] | None = None
+    observer_model: Callable[[Any], tuple[Any, Any, Any, Any]] | None = None
 
 
 _COMPONENTS: dict[str, dict[str, ComponentInfo]] = {k: {} for k in KINDS}

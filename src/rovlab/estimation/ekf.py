@@ -31,6 +31,19 @@ innovations wrapped. On a linear model this filter is therefore the linear Kalma
 :func:`build` refuses a sensor set that does not observe the state (local observability of the
 linearisation at the initial state; ``[ekf] dead_reckoning`` lists states the user accepts to
 dead-reckon, e.g. x and y without a position fix).
+
+Its table in the design file (read by this module with rovlab.params.validate.TableReader)::
+
+    [ekf]                                  # optional: the 4-DOF EKF (estimator = "ekf"; rovlab.estimation.ekf)
+    source = "..."
+    force_psd = { X = 1e-2, Y = 1e-2, Z = 1e-2, N = 1e-6 }      # white force noise W [N^2/Hz ...]
+    bias_psd = { X = 2e-2, Y = 2e-2, Z = 3e-3, N = 1e-4 }       # PSD of the bias drivers
+    bias_time_constant_s = { X = 60.0, Y = 60.0, Z = 60.0, N = 60.0 }
+    current = { north = 0.0, east = 0.0, down = 0.0 }           # a known current [m/s] (default 0)
+    substeps = 10                          # RK4 steps per sample
+    initial_state = { x = 0.0, psi_deg = 0.0 }                  # keys x y z psi_deg u v w r_deg_s b_X b_Y b_Z b_N
+    initial_std = { x = 1.0, psi_deg = 180.0 }
+    dead_reckoning = ["x", "y"]            # states accepted as unobservable (no position fix)
 """
 
 from __future__ import annotations
@@ -43,12 +56,12 @@ import numpy as np
 
 from rovlab._jit import WITH_NRT, njit, plain
 from rovlab.core.angles import wrap_angle
-from rovlab.core.components import ComponentInfo, EstimatorSpec, register_component, register_estimator
+from rovlab.core.components import WRENCH, ComponentInfo, EstimatorSpec, register_component, register_estimator
 from rovlab.estimation.fusion import new_channel_state
 from rovlab.estimation.kalman import correct_arrays, work_size
 from rovlab.estimation.model import channel_config, make_channels, observability, startup_time, unobservable_problem
 from rovlab.models import kinetics as kin
-from rovlab.params.design import BIAS_TIME_RANGE, DOFS, EKF_MEASURABLE, EKF_STATES, DesignConfig, per_key
+from rovlab.params.design import BIAS_TIME_RANGE, DesignConfig, per_key
 from rovlab.params.validate import ConfigError, Problem, TableReader
 from rovlab.params.vehicle import Vehicle
 
@@ -81,6 +94,9 @@ class EKFConfig:
 
 
 N_X = 12
+EKF_STATES = ("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N")
+EKF_MEASURABLE = EKF_STATES[:8]  # quantities a measurement may give the EKF
+DOFS = WRENCH  # X, Y, Z, N: the keys of the [ekf] force and bias tables
 STATE_OF_QUANTITY = {q: i for i, q in enumerate(EKF_STATES[:8])}
 _PSI = 3
 

@@ -76,6 +76,14 @@ def build(vehicle: Vehicle, config: DesignConfig) -> EstimatorSpec:
                          channels=tuple(fm.channels), h=fm.h, model=fm)
 
 
+def observer_model(spec: EstimatorSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The filter's own continuous model (A, B, E, W), the scenario's observer plant (Sandøy 2016,
+    sec. 5.3: the case study on the observer model)."""
+    fm = spec.model
+    return fm.A, fm.B, fm.E, fm.W
+
+
 register_component(ComponentInfo(
     "kf", "estimator", build,
-    description="depth-and-heading Kalman filter with bias states (Sandøy 2016, sec. 5.1)", measurable=MEASURABLE))
+    description="depth-and-heading Kalman filter with bias states (Sandøy 2016, sec. 5.1)", measurable=MEASURABLE,
+    observer_model=observer_model))

@@ -71,43 +71,13 @@ relative to the filter's own prior variance, see rovlab.estimation.fusion.)
     # Q_diag = [...4...]  R_diag = [...2...]   # explicit weights instead of Bryson's rule
     reference_gain = "discrete"            # or "continuous" (what the thesis computed)
 
-    [mrac]                                 # optional: model-reference adaptive heave control
-    source = "..."                         # (used when controller = "mrac"; see rovlab.control.mrac)
-    bandwidth = 0.6                        # omega_m [rad/s] of the second-order reference model
-    damping = 1.0                          # zeta_m
-    max_step = 0.5                         # [m] depth step the reference model must manage with
-                                           # the thrusters (checked against the allocation)
-    lambda = 2.0                           # [1/s] composite error s = e_dot + lambda e
-    k_s = 80.0                             # [N s/m] feedback on s
-    sigma = 0.0                            # [1/s] sigma-modification (0 = projection only)
-    hedge = true                           # pseudo-control hedging when the thrusters saturate
-    gain = { M = 50.0, D_l = 50.0, D_q = 50.0, F = 300.0 }      # adaptation gains Gamma
-    initial = { M = 18.44, D_l = 5.18, D_q = 36.99, F = -6.67 } # optional; default: the model
-    bounds = { M = [5.0, 60.0], F = [-30.0, 30.0] }             # optional projection set
+    [mrac] / [ekf] / [dp] / a plugin's [pd]   # optional: a component's own table, documented
+                                           # in its module (rovlab.control.mrac, rovlab.estimation.ekf,
+                                           # rovlab.control.dp) and in docs/mrac.md, docs/dp.md
 
-    [ekf]                                  # optional: the 4-DOF EKF (estimator = "ekf"; rovlab.estimation.ekf)
-    source = "..."
-    force_psd = { X = 1e-2, Y = 1e-2, Z = 1e-2, N = 1e-6 }      # white force noise W [N^2/Hz ...]
-    bias_psd = { X = 2e-2, Y = 2e-2, Z = 3e-3, N = 1e-4 }       # PSD of the bias drivers
-    bias_time_constant_s = { X = 60.0, Y = 60.0, Z = 60.0, N = 60.0 }
-    current = { north = 0.0, east = 0.0, down = 0.0 }           # a known current [m/s] (default 0)
-    substeps = 10                          # RK4 steps per sample
-    initial_state = { x = 0.0, psi_deg = 0.0 }                  # keys x y z psi_deg u v w r_deg_s b_X b_Y b_Z b_N
-    initial_std = { x = 1.0, psi_deg = 180.0 }
-    dead_reckoning = ["x", "y"]            # states accepted as unobservable (no position fix)
-
-    [dp]                                   # optional: the DP controller (controller = "dp"; rovlab.control.dp)
-    source = "..."
-    bandwidth = { x = 0.6, y = 0.6, z = 0.6, psi = 1.5 }        # closed-loop omega_n [rad/s]
-    damping = 1.0                          # zeta of the pole placement
-    integral_ratio = 0.1                   # K_i = ratio * omega_n * K_p
-    reference_bandwidth = { x = 0.4, y = 0.4, z = 0.4, psi = 0.5 }   # third-order reference model
-    reference_damping = 1.0
-    max_speed = { x = 0.15, y = 0.15, z = 0.15, psi_deg_s = 20.0 }  # reference-model speed limits
-    anti_windup = 1.0                      # back-calculation gain k_t = anti_windup * omega_n (0 = off)
-
-With ``estimator = "ekf"`` a measurement's quantity may also be x, y, u or v (motion capture
-position, DVL velocity). Units are SI and radians, except keys ending in ``_deg`` / ``_deg_s``
+A measurement's quantity is one the estimator can fuse (ComponentInfo.measurable: with
+``estimator = "ekf"`` also x, y, u or v, motion capture position and DVL velocity).
+Units are SI and radians, except keys ending in ``_deg`` / ``_deg_s``
 (degrees, degrees/s).
 This module only reads and checks the file; the maths lives in ``rovlab.estimation`` and
 ``rovlab.control``.
@@ -132,10 +102,6 @@ OBSERVER_STATES = ("z", "psi", "w", "r", "b_w", "b_r")
 CONTROL_STATES = ("z", "psi", "w", "r")
 INPUTS = ("Z", "N")
 MEASURABLE = ("z", "psi", "w", "r")  # quantities the depth-and-heading model can fuse
-EKF_MEASURABLE = ("x", "y", "z", "psi", "u", "v", "w", "r")  # quantities the 4-DOF EKF can fuse
-EKF_STATES = ("x", "y", "z", "psi", "u", "v", "w", "r", "b_X", "b_Y", "b_Z", "b_N")
-DOFS = ("X", "Y", "Z", "N")
-DP_AXES = ("x", "y", "z", "psi")
 MODEL_KEYS = ("mass", "I_zz", "Z_wdot", "N_rdot", "Z_w", "N_r")
 PSD_KEYS = ("w", "r", "b_w", "b_r")
 _DEG = math.pi / 180.0

@@ -35,7 +35,10 @@ import numpy as np
 
 from rovlab.control.mrac import PARAMETERS, reference_model
 from rovlab.models.discretise import zoh
-from rovlab.sim.runner import DesignBook, SimResult, prepare, run_prepared
+from rovlab.sim.designs import DesignBook
+from rovlab.sim.prepare import prepare
+from rovlab.sim.results import SimResult
+from rovlab.sim.runner import run_prepared
 from rovlab.sim.scenario import Scenario, scenario_from_dict
 
 BAND_M = 0.01

@@ -25,8 +25,11 @@ from rovlab.estimation.fusion import CH_MODE, MODE_AUTO, MODE_OFF, MODE_ON, new_
 from rovlab.io.messages import rows_to_messages
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
+from rovlab.sim.designs import DesignBook
 from rovlab.sim.loop import Drive, draw
-from rovlab.sim.runner import DesignBook, Prepared, Simulation, columns, disturbances, prepare, schedule
+from rovlab.sim.prepare import Prepared, disturbances, prepare, schedule
+from rovlab.sim.results import columns
+from rovlab.sim.runner import Simulation
 from rovlab.sim.scenario import Scenario, load_scenario
 
 _MODES = {"auto": MODE_AUTO, "off": MODE_OFF, "on": MODE_ON}
@@ -54,7 +57,7 @@ class LiveSimulation:
         self.prep = _prepare(self.scenario, self._book, **self._overrides)
         self.sim = Simulation(self.prep)
         self.rng = np.random.default_rng(self._seed)
-        self.rng.standard_normal(4)  # the initial bias draw, as in rovlab.sim.runner.prepare
+        self.rng.standard_normal(4)  # the initial bias draw, as in rovlab.sim.prepare.prepare
         self.reference = self.scenario.reference_at(0.0)
         rx, ry = self.scenario.reference_xy()
         self.reference_xy = (float(rx[0]), float(ry[0]))  # north, east set-point [m] (position controllers)

@@ -76,7 +76,7 @@ def new_work(m: int, n_nees: int, n_thrusters: int) -> Work:
 
 
 class Logs(NamedTuple):
-    """What the loop records per row (named into columns by rovlab.sim.runner)."""
+    """What the loop records per row (named into columns by rovlab.sim.results)."""
 
     truth: np.ndarray  # (n, N_TRUTH)
     y: np.ndarray  # (n, m) samples (NaN = none)

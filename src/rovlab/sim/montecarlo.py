@@ -29,11 +29,12 @@ from rovlab.sim import metrics as mx
 class Campaign:
     """What the runs of one scenario share within a process: the loaded files and the design
     (a DesignBook) and, when the scenario has no distributions, one prepared run that every seed
-    reseeds (rovlab.sim.runner.reseed: only the plant's initial bias and the draws are redone).
+    reseeds (rovlab.sim.prepare.reseed: only the plant's initial bias and the draws are redone).
     A scenario with distributions is prepared afresh per seed, its values being drawn from it."""
 
     def __init__(self, data: Mapping[str, Any], file: str, first_seed: int) -> None:
-        from rovlab.sim.runner import DesignBook, prepare
+        from rovlab.sim.designs import DesignBook
+        from rovlab.sim.prepare import prepare
         from rovlab.sim.scenario import has_distributions
 
         self.data, self.file = data, file
@@ -41,7 +42,7 @@ class Campaign:
         self.template = None if has_distributions(data) else prepare(data, file=file, seed=first_seed, book=self.book)
 
     def prepared(self, seed: int) -> Any:
-        from rovlab.sim.runner import prepare, reseed
+        from rovlab.sim.prepare import prepare, reseed
 
         if self.template is None:
             return prepare(self.data, file=self.file, seed=seed, book=self.book)
@@ -68,7 +69,7 @@ class Campaign:
 def _outcome(seed: int, result: Any) -> dict[str, Any]:
     """What a worker returns of a run: its metrics (metrics.json of the run), flattened for the
     statistics, and its NEES/NIS series."""
-    from rovlab.sim.runner import summarise
+    from rovlab.sim.results import summarise
 
     metrics = summarise(result)
     # flattened here, in the worker, rather than by summarise_runs in the parent after the runs

@@ -17,7 +17,7 @@ from rovlab.io.logs import write_csv
 from rovlab.io.messages import order_columns
 from rovlab.io.report import write_figures, write_nees_figure, write_report_html
 from rovlab.io.timeseries import series_path, write_mcap
-from rovlab.sim.runner import SimResult
+from rovlab.sim.results import SimResult
 
 
 def ordered_columns(result: SimResult) -> dict[str, np.ndarray]:

@@ -24,8 +24,9 @@ from rovlab.core.angles import wrap_angle
 from rovlab.core.components import N_TRUTH, TRUTH, fresh, plant_draws
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
+from rovlab.sim.designs import DesignBook
 from rovlab.sim.loop import Drive, draw
-from rovlab.sim.runner import DesignBook, disturbances, prepare, schedule
+from rovlab.sim.prepare import disturbances, prepare, schedule
 from rovlab.sim.scenario import Scenario, load_scenario
 
 _CHUNK = 600  # control steps of noise drawn at a time
@@ -64,7 +65,7 @@ class SimulatedVehicle:
                             book=DesignBook())
         self.plant = fresh(self.prep.plant)
         self.rng = np.random.default_rng(seed)
-        self.rng.standard_normal(4)  # the initial bias draw, as in rovlab.sim.runner.prepare
+        self.rng.standard_normal(4)  # the initial bias draw, as in rovlab.sim.prepare.prepare
         act = self.prep.actuators
         self.neutral_pwm = np.asarray(bank_pwm(act.rows, act.grid_pwm, act.grid_force, np.zeros(act.rows.shape[0])))
         self.pwm = self.neutral_pwm.copy()

@@ -17,7 +17,7 @@ import numpy as np
 from rovlab.core.angles import wrap_angle as _wrap
 from rovlab.models import kinetics as kin
 from rovlab.sim.plant import ObserverPlant
-from rovlab.sim.runner import Prepared
+from rovlab.sim.prepare import Prepared
 
 
 def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) -> dict[str, np.ndarray]:

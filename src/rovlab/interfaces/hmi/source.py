@@ -148,7 +148,7 @@ class SimulationSource:
 
 
 def design_summary(design: Any, *, truth: Vehicle, controller: str) -> dict[str, Any]:
-    """The parameters and gains of a running design (rovlab.sim.runner.Design), as the HMI shows
+    """The parameters and gains of a running design (rovlab.sim.designs.Design), as the HMI shows
     them: shared by the simulation and the vehicle bridges' sources."""
     fm = design.estimator.model
     v, config = design.vehicle, design.config

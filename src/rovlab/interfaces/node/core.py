@@ -82,7 +82,7 @@ from rovlab.io.messages import command_message, estimate_message, measurement_me
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
 from rovlab.sim.actuators import make_actuators
-from rovlab.sim.runner import Design, make_design
+from rovlab.sim.designs import Design, make_design
 
 SAMPLE_RESULTS = ("accepted", "late", "out-of-order", "unused", "disabled", "future", "invalid")
 _MODES = {"auto": MODE_AUTO, "off": MODE_OFF, "on": MODE_ON}

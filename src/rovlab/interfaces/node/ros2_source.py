@@ -55,7 +55,7 @@ class Ros2Source:
     def __init__(self, *, vehicle: Vehicle, config: DesignConfig, config_data: Mapping[str, Any],
                  stash: Mapping[int, Mapping[str, Any]], namespace: str = "", node_name: str = "rovlab_node",
                  timeout_s: float = 10.0) -> None:
-        from rovlab.sim.runner import make_design
+        from rovlab.sim.designs import make_design
 
         self.vehicle, self.config = vehicle, config
         self.design = make_design(vehicle, config, plant="process", plant_step=config.sample_time)
@@ -190,7 +190,7 @@ class Ros2Source:
         data = self._stash.get(id(config))
         if data is None:
             raise ValueError("the configuration to apply is not one of the HMI's documents")
-        from rovlab.sim.runner import make_design
+        from rovlab.sim.designs import make_design
 
         design = make_design(self.vehicle, config, plant="process", plant_step=config.sample_time)
         new = rc.parameter_values(data, design)
