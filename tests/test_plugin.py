@@ -57,6 +57,23 @@ def test_its_tables_are_read_by_the_loader_with_the_loaders_errors():
     assert cfg.table("pd") == type(cfg.table("pd"))()
 
 
+def test_rovlab_design_shows_them_by_their_tables(capsys):
+    """`rovlab design` asks each component for its summary; a component without one (the plugin's)
+    is shown by its table's values, in the text and in --json."""
+    from rovlab.interfaces.cli import main
+
+    assert main(["design", "--config", str(CONFIG)]) == 0
+    out = capsys.readouterr().out
+    assert "estimator complementary: complementary depth-and-heading filter" in out
+    assert "controller pd:" in out and "kp_z 40" in out and "k_vel = 1" in out
+    assert main(["design", "--config", str(CONFIG), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["estimator"] == "complementary" and info["controller"] == "pd"
+    assert info["pd"]["kp_z"] == 40.0 and info["complementary"]["k_pos"] == 0.5
+    assert main(["design", "--config", str(CONFIG), "--allow-unobservable"]) == 2
+    assert "estimator 'complementary' has no such option" in capsys.readouterr().err
+
+
 def test_a_scenario_runs_with_them_and_holds_the_depth(tmp_path):
     res = subprocess.run([sys.executable, "-m", "rovlab.interfaces.cli", "simulate", str(SCENARIO), "--out",
                           str(tmp_path / "run"), "--no-figures"], capture_output=True, text=True, timeout=600)
@@ -69,7 +86,7 @@ def test_a_scenario_runs_with_them_and_holds_the_depth(tmp_path):
     assert needs_compiling("process-complementary-pd", shipped=False)
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert metrics["rms_error"]["z"] < 0.05 and metrics["rms_error"]["psi"] < np.radians(3.0)
-    from rovlab.io.logs import read_log
+    from rovlab.io.logreader import read_log
 
     log = read_log(tmp_path / "run" / "timeseries.csv")
     assert abs(float(np.mean(log["true_z"][-100:])) - 0.70) < 0.08  # the 0.70 m step is held by the PD law
@@ -110,7 +127,7 @@ def test_the_hmi_session_runs_them():
 
 def test_rovlab_filter_replays_a_log_with_the_plugins_estimator(tmp_path):
     from rovlab.interfaces.cli import main
-    from rovlab.io.logs import read_log
+    from rovlab.io.logreader import read_log
 
     run = tmp_path / "run"
     assert main(["simulate", str(SCENARIO), "--out", str(run), "--no-figures"]) == 0

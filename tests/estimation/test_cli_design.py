@@ -165,3 +165,24 @@ def test_design_text_names_the_bias_time_constants_and_prints_gamma_and_h(capsys
     assert "deg" not in out and "psi [rad]" in out and "rad^2" in out
     h = out.split("  H =\n")[1].splitlines()[:3]
     assert h == ["    [ 1   0   0   0   0   0]", "    [ 1   0   0   0   0   0]", "    [ 0   1   0   0   0   0]"]
+
+
+def test_design_of_the_ekf_and_dp_is_their_own_summary(capsys):
+    """`rovlab design` works from the components' declarations: with estimator ekf and controller dp
+    it shows the EKF's noise model and the DP gains, which follow Fossen (2011, sec. 12.2)'s pole
+    placement K_p = M omega_n^2, K_i = ratio omega_n K_p."""
+    from rovlab.params.design import load_design_config
+
+    code, out, _ = run(capsys, "design", "--vehicle", "bluerov2_heavy", "--config", "bluerov2_heavy_dp", "--json")
+    assert code == 0
+    info = json.loads(out)
+    assert info["estimator"] == "ekf" and info["controller"] == "dp"
+    assert info["states"][:4] == ["x", "y", "z", "psi"] and "force_psd" in info["ekf"]
+    dp = load_design_config("bluerov2_heavy_dp").table("dp")
+    g = info["dp"]
+    for i, axis in enumerate(g["axes"]):
+        wn = dp.bandwidth[i]
+        assert g["Kp"][i] == pytest.approx(g["M"][i] * wn ** 2, rel=1e-12), axis
+        assert g["Ki"][i] == pytest.approx(dp.integral_ratio * wn * g["Kp"][i], rel=1e-12), axis
+    code, out, _ = run(capsys, "design", "--vehicle", "bluerov2_heavy", "--config", "bluerov2_heavy_dp")
+    assert code == 0 and "controller dp:" in out and "Kp = [" in out and "force_psd: X" in out

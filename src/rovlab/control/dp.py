@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -270,6 +270,14 @@ def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:
                           references=DP_AXES, outputs=("X", "Y", "Z", "N"), state_names=STATE_NAMES, model=d)
 
 
+def summary(d: Any) -> dict[str, Any]:
+    """The DP law's gains per axis x, y, z, psi (pole placement, Fossen 2011 sec. 12.2) and the
+    mass it is placed with (``rovlab design --json``, the HMI)."""
+    return {"dp": {"axes": list(DP_AXES), "Kp": np.asarray(d.Kp, dtype=float).tolist(),
+                   "Ki": np.asarray(d.Ki, dtype=float).tolist(), "Kd": np.asarray(d.Kd, dtype=float).tolist(),
+                   "M": np.asarray(d.M, dtype=float).tolist()}}
+
+
 def read_dp_table(t: TableReader) -> DPConfig:
     """Read the [dp] table of a design file with the loader's reader (closed schema; every problem collected)."""
     base = DPConfig()
@@ -296,4 +304,4 @@ def read_dp_table(t: TableReader) -> DPConfig:
 register_component(ComponentInfo(
     "dp", "controller", build,
     description="dynamic positioning x, y, z, psi: reference model and nonlinear PID (Fossen 2011, ch. 12)",
-    parse_table=read_dp_table, default_table=DPConfig))
+    parse_table=read_dp_table, default_table=DPConfig, summary=lambda spec: summary(spec.model)))

@@ -25,7 +25,7 @@ allocation are sibling layers and do not import each other).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -46,6 +46,7 @@ from rovlab.core.components import (
     register_component,
     register_controller,
 )
+from rovlab.core.summary import render
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
 
@@ -126,6 +127,22 @@ def tau_to_wrench(tau: np.ndarray) -> np.ndarray:
     return np.array([0.0, 0.0, Z, N])
 
 
+def lqr_summary(design: LQRDesign) -> dict[str, Any]:
+    """The LQR of a design (the keys K, P, lqr of ``rovlab design --json``)."""
+    return {"K": design.K.tolist(), "P": design.P.tolist(),
+            "lqr": {"states": ["z", "psi", "w", "r"], "Q": np.diag(design.Q).tolist(), "R": np.diag(design.R).tolist(),
+                    "reference_gain": design.reference,
+                    "closed_loop_poles_abs": np.abs(design.poles).tolist()}}
+
+
+def lqr_lines(design: LQRDesign) -> list[str]:
+    """The LQR for people (``rovlab design``)."""
+    return [*render({"K (LQR) on [z, psi, w, r]": design.K}),
+            *render({f"P (reference gain, {design.reference})": design.P}),
+            f"  |closed-loop poles| = {', '.join(f'{a:.4f}' for a in np.abs(design.poles))}"]
+
+
 register_component(ComponentInfo(
     "lqg", "controller", build,
-    description="LQR depth and heading with the filter's bias estimate fed forward (Sandøy 2016, sec. 5.2)"))
+    description="LQR depth and heading with the filter's bias estimate fed forward (Sandøy 2016, sec. 5.2)",
+    summary=lambda spec: lqr_summary(spec.model), describe=lambda spec: lqr_lines(spec.model)))

@@ -62,7 +62,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from rovlab._jit import njit
-from rovlab.control.lqg import lqg_tau
+from rovlab.control.lqg import lqg_tau, lqr_lines, lqr_summary
 from rovlab.control.lqr import LQRDesign, design_lqr_from_config
 from rovlab.core.components import (
     NAV_BN,
@@ -78,6 +78,7 @@ from rovlab.core.components import (
     register_component,
     register_controller,
 )
+from rovlab.core.summary import render
 from rovlab.models.discretise import zoh
 from rovlab.params.design import DesignConfig
 from rovlab.params.validate import ConfigError, Problem, TableReader
@@ -432,4 +433,7 @@ def check_heave_capacity(spec: ControllerSpec, alloc: Any, where: str) -> None:
 register_component(ComponentInfo(
     "mrac", "controller", build,
     description="model-reference adaptive heave control with LQR heading (Sandøy 2016, thesis description, task 7)",
-    parse_table=read_mrac_table, default_table=MRACConfig, check=check_heave_capacity))
+    parse_table=read_mrac_table, default_table=MRACConfig, check=check_heave_capacity,
+    summary=lambda spec: {**lqr_summary(spec.model.lqr), "mrac": spec.model.summary()},
+    describe=lambda spec: ["  heave: MRAC (the heading on the LQR's row N)", *render({"mrac": spec.model.summary()}),
+                           *lqr_lines(spec.model.lqr)]))

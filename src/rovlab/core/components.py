@@ -296,6 +296,11 @@ class ComponentInfo:
     an estimator's own linear model usable as a scenario's observer plant (plant = "observer"):
     the continuous (A, B, E, W) of its six states [z, w, b_w, psi, r, b_r] (the depth-and-heading
     KF's, Sandøy 2016 sec. 5.1).
+
+    ``summary(spec)``, if given, is what ``rovlab design --json``, the HMI and the nodes show of a
+    designed component: named numbers and arrays (SI units, JSON values); ``describe(spec)`` the
+    same for people, as lines of text (default: the summary, rendered by rovlab.core.summary). A
+    component with neither is shown by its table's values.
     """
 
     name: str
@@ -307,6 +312,8 @@ class ComponentInfo:
     measurable: tuple[str, ...] = ()
     check: Callable[[Any, Any, str], None] | None = None
     observer_model: Callable[[Any], tuple[Any, Any, Any, Any]] | None = None
+    summary: Callable[[Any], dict[str, Any]] | None = None
+    describe: Callable[[Any], list[str]] | None = None
 
 
 _COMPONENTS: dict[str, dict[str, ComponentInfo]] = {k: {} for k in KINDS}

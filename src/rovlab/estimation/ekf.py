@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -436,7 +436,29 @@ def read_ekf_table(t: TableReader) -> EKFConfig:
                      initial_state=x0, initial_std=std, dead_reckoning=tuple(dead), source=source, given=True)
 
 
+def summary(spec: EstimatorSpec) -> dict[str, Any]:
+    """The EKF's design (``rovlab design --json``, the HMI): its states, channels, noise model and
+    the linearisation at its initial estimate."""
+    m = spec.model
+    return {
+        "sample_time": m.h,
+        "states": list(EKF_STATES),
+        "measurements": [c.name for c in m.channels],
+        "observable": bool(m.observable),
+        "dead_reckoned": list(m.dead_reckoned),
+        # heave and yaw in the KF's terms (the HMI's bias line): the bias time constants of b_Z, b_N
+        "model": {"T_w": float(1.0 / m.inv_T[2]), "T_r": float(1.0 / m.inv_T[3])},
+        "ekf": {"force_psd": dict(zip(DOFS, map(float, m.W[:4]))), "bias_psd": dict(zip(DOFS, map(float, m.W[4:]))),
+                "bias_time_constant_s": dict(zip(DOFS, (float(1.0 / v) for v in m.inv_T))),
+                "initial_std": dict(zip(EKF_STATES, map(float, np.sqrt(np.diag(m.P0)))))},
+        "H": m.H.tolist(),
+        "R": m.R.tolist(),
+        "Phi": m.Phi0.tolist(),
+        "Q": m.Q0.tolist(),
+    }
+
+
 register_component(ComponentInfo(
     "ekf", "estimator", build,
     description="4-DOF extended Kalman filter on the nonlinear model (Sandøy 2016, further work)",
-    parse_table=read_ekf_table, default_table=EKFConfig, measurable=EKF_MEASURABLE))
+    parse_table=read_ekf_table, default_table=EKFConfig, measurable=EKF_MEASURABLE, summary=summary))

@@ -10,12 +10,13 @@ the allocation achieved.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from rovlab._jit import njit, plain
 from rovlab.core.components import ComponentInfo, EstimatorSpec, register_component, register_estimator
+from rovlab.core.summary import render
 from rovlab.estimation.fusion import new_channel_state
 from rovlab.estimation.kalman import correct_arrays, pack_model, predict_arrays, unpack_model, work_size
 from rovlab.estimation.model import FilterModel, build_filter_model
@@ -69,9 +70,10 @@ def from_model(fm: FilterModel) -> KalmanFilter:
                         np.zeros(len(_INPUTS)), np.empty(plain(work_size)(n, m)))
 
 
-def build(vehicle: Vehicle, config: DesignConfig) -> EstimatorSpec:
-    """Design the depth-and-heading filter of a configuration (raises ConfigError)."""
-    fm = build_filter_model(vehicle, config)
+def build(vehicle: Vehicle, config: DesignConfig, *, require_observable: bool = True) -> EstimatorSpec:
+    """Design the depth-and-heading filter of a configuration (raises ConfigError; an unobservable
+    sensor set too, unless not ``require_observable``: ``rovlab design --allow-unobservable``)."""
+    fm = build_filter_model(vehicle, config, require_observable=require_observable)
     return EstimatorSpec(kernel=from_model(fm), states=tuple(fm.states), nav=tuple(_NAV[s] for s in fm.states),
                          channels=tuple(fm.channels), h=fm.h, model=fm)
 
@@ -83,7 +85,66 @@ def observer_model(spec: EstimatorSpec) -> tuple[np.ndarray, np.ndarray, np.ndar
     return fm.A, fm.B, fm.E, fm.W
 
 
+def summary(spec: EstimatorSpec) -> dict[str, Any]:
+    """The discretised depth-and-heading model (Sandøy 2016, secs. 5.1-5.2): the keys of
+    ``rovlab design --json``."""
+    from rovlab.estimation.model import describe_direction
+
+    fm = spec.model
+    p = fm.params
+    return {
+        "sample_time": fm.h,
+        "states": list(fm.states),
+        "inputs": list(fm.inputs),
+        "measurements": [c.name for c in fm.channels],
+        "Phi": fm.Phi.tolist(),
+        "Delta": fm.Delta.tolist(),
+        "Gamma": fm.Gamma.tolist(),
+        "Q": fm.Q.tolist(),
+        "H": fm.H.tolist(),
+        "R": fm.R.tolist(),
+        "observable": bool(fm.observable),
+        "unobservable": list(fm.unobservable),
+        "unobservable_directions": [describe_direction(fm.unobservable_directions[:, k])
+                                    for k in range(fm.unobservable_directions.shape[1])],
+        "model": {"M_w": p.M_w, "M_r": p.M_r, "Z_w": p.Z_w, "N_r": p.N_r, "T_w": fm.T_w, "T_r": fm.T_r},
+        "W": np.diag(fm.W).tolist(),
+    }
+
+
+def describe(spec: EstimatorSpec) -> list[str]:
+    """The design for people: SI units throughout (radians, never degrees), the same numbers as
+    :func:`summary`, labelled."""
+    fm = spec.model
+    p = fm.params
+    out = ["  units: states z [m], psi [rad], w [m/s], r [rad/s], b_w [N], b_r [N m]; inputs Z [N], N [N m]",
+           f"  model: M_w = {p.M_w:.6g} kg, M_r = {p.M_r:.6g} kg m^2, Z_w = {p.Z_w:.6g} kg/s, "
+           f"N_r = {p.N_r:.6g} kg m^2/s",
+           f"    velocity time constants: heave M_w/-Z_w = {_ratio(p.M_w, -p.Z_w)}, "
+           f"yaw M_r/-N_r = {_ratio(p.M_r, -p.N_r)}",
+           f"  bias model (Gauss-Markov): time constants T_w = {fm.T_w:.6g} s (b_w), T_r = {fm.T_r:.6g} s (b_r)",
+           "  process noise W = diag(" + ", ".join(f"{n} {v:.6g}" for n, v in zip(fm.states, np.diag(fm.W))) + ")",
+           "  measurements (variance in the channel's units squared: m^2 for z, rad^2 for psi):"]
+    for c in fm.channels:
+        gate = "off" if not np.isfinite(c.gate_threshold) else f"chi2 {c.gate_threshold:.3g}"
+        unit = "rad^2" if c.angle else "m^2"
+        out.append(f"    {c.name:16s} column {c.column:14s} variance {c.variance:.6g} {unit}  l_z {c.offset:+.4g} m  "
+                   f"timeout {c.timeout_s:g} s  gate {gate}")
+    if fm.observable:
+        out.append("  observable: yes")
+    else:
+        dirs = summary(spec)["unobservable_directions"]
+        out.append(f"  observable: NO -- cannot estimate {', '.join(fm.unobservable)} ({'; '.join(dirs)})")
+    for name in ("Phi", "Delta", "Gamma", "Q", "H", "R"):
+        out.extend(render({name: getattr(fm, name)}))
+    return out
+
+
+def _ratio(a: float, b: float) -> str:
+    return f"{a / b:.6g} s" if b > 0 else "none (no damping)"
+
+
 register_component(ComponentInfo(
     "kf", "estimator", build,
     description="depth-and-heading Kalman filter with bias states (Sandøy 2016, sec. 5.1)", measurable=MEASURABLE,
-    observer_model=observer_model))
+    observer_model=observer_model, summary=summary, describe=describe))

@@ -22,7 +22,8 @@ INPUT_COLUMNS = ("tau_Z", "tau_N")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    des = sub.add_parser("design", help="discretise the depth-and-heading model, check observability, design the LQR")
+    des = sub.add_parser("design", help="design a configuration's estimator and controller and show them (the KF: "
+                                        "discretised model, observability; the LQR: gains)")
     _common(des)
     des.add_argument("--json", action="store_true", help="machine-readable output (SI units)")
     des.add_argument("--allow-unobservable", action="store_true",
@@ -53,91 +54,53 @@ def _common(p: argparse.ArgumentParser) -> None:
                         "(default: default)")
 
 
-def _load(args: argparse.Namespace, *, require_observable: bool = True):
-    from rovlab.estimation.model import build_filter_model
-    from rovlab.params.design import load_design_config
-    from rovlab.params.vehicle import load_vehicle
-
-    vehicle = load_vehicle(args.vehicle)
-    config = load_design_config(args.config)
-    return vehicle, config, build_filter_model(vehicle, config, require_observable=require_observable)
-
-
 # --------------------------------------------------------------------------------------------
 # design
 # --------------------------------------------------------------------------------------------
 
 def _cmd_design(args: argparse.Namespace) -> int:
-    from rovlab.control.lqr import design_lqr_from_config
-    from rovlab.estimation.model import describe_direction
+    """The design of a configuration's estimator and controller, as each component summarises
+    itself (ComponentInfo.summary / describe; a component with neither by its table's values)."""
+    import inspect
 
-    vehicle, config, model = _load(args, require_observable=not args.allow_unobservable)
-    lqr = design_lqr_from_config(vehicle, config)
-    p = model.params
-    info: dict[str, Any] = {
-        "vehicle": vehicle.name,
-        "config": config.name,
-        "sample_time": model.h,
-        "states": list(model.states),
-        "inputs": list(model.inputs),
-        "measurements": [c.name for c in model.channels],
-        "Phi": model.Phi.tolist(),
-        "Delta": model.Delta.tolist(),
-        "Gamma": model.Gamma.tolist(),
-        "Q": model.Q.tolist(),
-        "H": model.H.tolist(),
-        "R": model.R.tolist(),
-        "K": lqr.K.tolist(),
-        "P": lqr.P.tolist(),
-        "observable": bool(model.observable),
-        "unobservable": list(model.unobservable),
-        "unobservable_directions": [describe_direction(model.unobservable_directions[:, k])
-                                    for k in range(model.unobservable_directions.shape[1])],
-        "model": {"M_w": p.M_w, "M_r": p.M_r, "Z_w": p.Z_w, "N_r": p.N_r, "T_w": model.T_w, "T_r": model.T_r},
-        "W": np.diag(model.W).tolist(),
-        "lqr": {"states": ["z", "psi", "w", "r"], "Q": np.diag(lqr.Q).tolist(), "R": np.diag(lqr.R).tolist(),
-                "reference_gain": lqr.reference, "closed_loop_poles_abs": np.abs(lqr.poles).tolist()},
-    }
+    from rovlab.core.components import component
+    from rovlab.core.summary import render, table_values
+    from rovlab.interfaces.cli import UserError
+    from rovlab.params.design import load_design_config
+    from rovlab.params.vehicle import load_vehicle
+    from rovlab.sim.components import build_pair
+
+    vehicle = load_vehicle(args.vehicle)
+    config = load_design_config(args.config)
+    est_info, ctl_info = component("estimator", config.estimator), component("controller", config.controller)
+    options: dict[str, Any] = {}
+    if args.allow_unobservable and est_info is not None:
+        if "require_observable" not in inspect.signature(est_info.build).parameters:
+            raise UserError(f"--allow-unobservable: estimator {est_info.name!r} has no such option "
+                            "(it checks its own observability; kf has the option)")
+        options["require_observable"] = False
+    est, ctl = build_pair(vehicle, config, estimator_options=options)  # ConfigError for unknown names
+    assert est_info is not None and ctl_info is not None
+    parts = (("estimator", est_info, est), ("controller", ctl_info, ctl))
+    info: dict[str, Any] = {"vehicle": vehicle.name, "config": config.name, "sample_time": est.h,
+                            "estimator": est_info.name, "controller": ctl_info.name}
+    summaries = {}
+    for kind, ci, spec in parts:
+        summary = ci.summary(spec) if ci.summary is not None else {}
+        if not summary and ci.default_table is not None:
+            summary = {ci.name: table_values(config.table(ci.name))}
+        summaries[kind] = summary
+        info.update({k: v for k, v in summary.items() if k not in info})
     if args.json:
         print(json.dumps(info, indent=1))
         return 0
-    # SI units throughout (radians, never degrees): the same numbers as --json, labelled
-    print(f"vehicle {vehicle.name}, configuration {config.name} ({config.file}); sample time {model.h:g} s")
-    print("  units: states z [m], psi [rad], w [m/s], r [rad/s], b_w [N], b_r [N m]; inputs Z [N], N [N m]")
-    print(f"  model: M_w = {p.M_w:.6g} kg, M_r = {p.M_r:.6g} kg m^2, Z_w = {p.Z_w:.6g} kg/s, "
-          f"N_r = {p.N_r:.6g} kg m^2/s")
-    print(f"    velocity time constants: heave M_w/-Z_w = {_ratio(p.M_w, -p.Z_w)}, "
-          f"yaw M_r/-N_r = {_ratio(p.M_r, -p.N_r)}")
-    print(f"  bias model (Gauss-Markov): time constants T_w = {model.T_w:.6g} s (b_w), T_r = {model.T_r:.6g} s (b_r)")
-    w = np.diag(model.W)
-    print("  process noise W = diag(" + ", ".join(f"{name} {v:.6g}" for name, v in zip(model.states, w)) + ")")
-    print("  measurements (variance in the channel's units squared: m^2 for z, rad^2 for psi):")
-    for c in model.channels:
-        gate = "off" if not np.isfinite(c.gate_threshold) else f"chi2 {c.gate_threshold:.3g}"
-        unit = "rad^2" if c.angle else "m^2"
-        print(f"    {c.name:16s} column {c.column:14s} variance {c.variance:.6g} {unit}  l_z {c.offset:+.4g} m  "
-              f"timeout {c.timeout_s:g} s  gate {gate}")
-    if model.observable:
-        print("  observable: yes")
-    else:
-        print(f"  observable: NO -- cannot estimate {', '.join(model.unobservable)} "
-              f"({'; '.join(info['unobservable_directions'])})")
-    for name in ("Phi", "Delta", "Gamma", "Q", "H", "R"):
-        _print_matrix(name, getattr(model, name))
-    _print_matrix("K (LQR) on [z, psi, w, r]", lqr.K)
-    _print_matrix(f"P (reference gain, {lqr.reference})", lqr.P)
-    print(f"  |closed-loop poles| = {', '.join(f'{a:.4f}' for a in np.abs(lqr.poles))}")
+    print(f"vehicle {vehicle.name}, configuration {config.name} ({config.file}); sample time {est.h:g} s")
+    for kind, ci, spec in parts:
+        print(f"{kind} {ci.name}: {ci.description or '(no description)'}")
+        lines = ci.describe(spec) if ci.describe is not None else render(summaries[kind])
+        for line in lines or ["  (the component declares no summary and owns no table)"]:
+            print(line)
     return 0
-
-
-def _ratio(a: float, b: float) -> str:
-    return f"{a / b:.6g} s" if b > 0 else "none (no damping)"
-
-
-def _print_matrix(name: str, M: np.ndarray) -> None:
-    print(f"  {name} =")
-    for row in np.atleast_2d(M):
-        print("    [" + "  ".join(f"{v: .6g}" for v in row) + "]")
 
 
 # --------------------------------------------------------------------------------------------
@@ -218,7 +181,7 @@ def _as_csv(log: str, vehicle, model, folder: Path) -> str:
         raise UserError(f"cannot read {log}: {exc.strerror or exc}") from None
     if any(t.startswith("/mavlink/") for t in topics):
         return _mavlink_as_csv(log, vehicle, model, folder)
-    from rovlab.io.logs import write_csv
+    from rovlab.io.logwriter import write_csv
 
     out = folder / (Path(log).stem + ".csv")
     write_csv(out, read_mcap_columns(log), exact=("time_s",))
@@ -243,7 +206,7 @@ def _mavlink_as_csv(log: str, vehicle, model, folder: Path) -> str:
 
 
 def _filter(args: argparse.Namespace, vehicle, config, filt, inputs: tuple[str, ...], log: str) -> int:
-    from rovlab.io.logs import LogStream
+    from rovlab.io.logreader import LogStream
 
     model = filt.model
     columns = [c.column for c in model.channels]
@@ -276,7 +239,7 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
     )
     from rovlab.estimation.streaming import IntervalError, StreamingFilter
     from rovlab.interfaces.cli import UserError
-    from rovlab.io.logs import ChunkWriter
+    from rovlab.io.logwriter import ChunkWriter
     from rovlab.io.tables import write_sidecar
 
     model = filt.model

@@ -58,8 +58,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
 def _cmd_compile(args: argparse.Namespace) -> int:
     from rovlab.interfaces.cli import UserError
     from rovlab.sim.compile import needs_compiling
-    from rovlab.sim.runner import compile_loop, shipped_components
     from rovlab.sim.prepare import prepare
+    from rovlab.sim.runner import compile_loop, shipped_components
     from rovlab.sim.scenario import load_scenario_data, packaged_scenario_names
 
     if bool(args.scenarios) == bool(args.all):
@@ -153,9 +153,9 @@ def _run(data, file, seed, compiled: list[float] | None = None):
     """One run of the scenario and its metrics."""
     from rovlab.interfaces.cli import UserError
     from rovlab.interfaces.compiling import ensure_compiled
-    from rovlab.sim.runner import PlantDiverged, run_prepared
     from rovlab.sim.prepare import prepare
     from rovlab.sim.results import summarise
+    from rovlab.sim.runner import PlantDiverged, run_prepared
 
     prep = prepare(data, file=file, seed=seed)
     try:

@@ -8,6 +8,9 @@ through entry points); a design configuration or a scenario chooses them with
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 from rovlab.core.components import ControllerSpec, EstimatorSpec, component, unknown_component
 from rovlab.params.design import DesignConfig
 from rovlab.params.validate import ConfigError, Problem
@@ -15,10 +18,12 @@ from rovlab.params.vehicle import Vehicle
 
 
 def build_pair(vehicle: Vehicle, config: DesignConfig, *, estimator: str | None = None,
-               controller: str | None = None, file: str | None = None) -> tuple[EstimatorSpec, ControllerSpec]:
+               controller: str | None = None, file: str | None = None,
+               estimator_options: Mapping[str, Any] | None = None) -> tuple[EstimatorSpec, ControllerSpec]:
     """Design the chosen estimator and controller; ConfigError if a name is unknown or the
     controller needs something the estimator does not estimate. ``estimator``/``controller``
-    override the configuration's choice (from ``file``, e.g. a scenario)."""
+    override the configuration's choice (from ``file``, e.g. a scenario); ``estimator_options``
+    are keyword arguments of the estimator's build (e.g. the KF's ``require_observable``)."""
     cfg_file = config.file or config.name
     est_name = estimator or config.estimator
     ctl_name = controller or config.controller
@@ -33,7 +38,7 @@ def build_pair(vehicle: Vehicle, config: DesignConfig, *, estimator: str | None 
         problems.append(Problem(where, "controller", ctl_name, unknown_component("controller", ctl_name)))
     if problems or est_info is None or ctl_info is None:
         raise ConfigError(problems, "filter configuration")
-    est = est_info.build(vehicle, config)
+    est = est_info.build(vehicle, config, **(estimator_options or {}))
     ctl = ctl_info.build(vehicle, config)
     missing = [q for q in ctl.needs if q not in est.provides]
     if missing:

@@ -88,7 +88,7 @@ class SimulationSource:
     def describe(self) -> dict[str, Any]:
         sim = self.sim
         sc = sim.scenario
-        fm = sim.prep.filter_model
+        est = sim.prep.design.estimator  # what every estimator declares (EstimatorSpec), a plugin's too
         return {
             "kind": self.kind,
             "scenario": {"name": sc.name, "description": sc.description, "plant": sc.plant, "seed": sc.seed,
@@ -97,9 +97,9 @@ class SimulationSource:
             "config": sim.config.name,
             "h": self.h,
             "has_truth": True,
-            "states": list(fm.states),
+            "states": list(est.states),
             "channels": [{"name": c.name, "column": c.column, "sensor": c.sensor, "quantity": c.quantity,
-                          "offset": c.offset} for c in fm.channels],
+                          "offset": c.offset} for c in est.channels],
             "sensors": list(sim.sensor_available),
             "thrusters": list(sim.prep.allocator.bank.names),
             "controller": _controller_name(sim.prep),
@@ -144,45 +144,52 @@ class SimulationSource:
 
     def loop_summary(self) -> dict[str, Any]:
         prep = self.sim.prep
-        return design_summary(prep.design, truth=prep.truth, controller=_controller_name(prep))
+        return design_summary(prep.design, truth=prep.truth, controller=_controller_name(prep),
+                              estimator=prep.scenario.estimator or prep.config.estimator)
 
 
-def design_summary(design: Any, *, truth: Vehicle, controller: str) -> dict[str, Any]:
+def design_summary(design: Any, *, truth: Vehicle, controller: str, estimator: str | None = None) -> dict[str, Any]:
     """The parameters and gains of a running design (rovlab.sim.designs.Design), as the HMI shows
-    them: shared by the simulation and the vehicle bridges' sources."""
-    fm = design.estimator.model
+    them: shared by the simulation and the vehicle bridges' sources. Built from what the components
+    declare (ComponentInfo.summary, their tables), so a plugin's estimator or controller is shown
+    like a shipped one; the keys the page's bespoke forms read (model, K, P, Q_diag, mrac, dp) come
+    from those summaries where a component gives them."""
+    from rovlab.core.components import component, component_names
+    from rovlab.core.summary import table_values
+
     v, config = design.vehicle, design.config
+    estimator = estimator or config.estimator
     M = np.diag(mass_matrix(v))
-    if hasattr(fm, "T_w"):  # the depth-and-heading filter
-        model = {**config.model_values(v), "T_w": fm.T_w, "T_r": fm.T_r, "M_w": fm.params.M_w,
-                 "M_r": fm.params.M_r}
-        W, Q = np.diag(fm.W)[2:], np.diag(fm.Q)
-    elif hasattr(fm, "inv_T"):  # the 4-DOF EKF: its heave and yaw entries in the same shape (W: Z, N, b_Z, b_N)
-        model = {**config.model_values(v), "T_w": float(1.0 / fm.inv_T[2]), "T_r": float(1.0 / fm.inv_T[3]),
-                 "M_w": float(M[2]), "M_r": float(M[3])}
-        W, Q = fm.W[[2, 3, 6, 7]], np.diag(fm.Q0)
-    else:  # another estimator (a plugin's): the vehicle's model, no noise model to show
-        model = {**config.model_values(v), "M_w": float(M[2]), "M_r": float(M[3])}
-        W, Q = np.zeros(0), np.zeros(0)
-    ctl = design.controller.model
+    parts: dict[str, Any] = {}
+    tables: dict[str, Any] = {}
+    for kind, name, spec in (("estimator", estimator, design.estimator), ("controller", controller, design.controller)):
+        info = component(kind, name)
+        summary = info.summary(spec) if info is not None and info.summary is not None else {}
+        parts[kind] = {"name": name, "description": info.description if info is not None else "", "summary": summary}
+        if info is not None and info.default_table is not None:
+            tables[name] = table_values(config.table(name))
+    est, ctl = parts["estimator"]["summary"], parts["controller"]["summary"]
+    model = {**config.model_values(v), "M_w": float(M[2]), "M_r": float(M[3]), **est.get("model", {})}
     out: dict[str, Any] = {
         "model": model,
         "vehicle": _vehicle_summary(v),
         "truth": _vehicle_summary(truth),
-        "W": _floats(W),
         "R": {c.name: c.variance for c in design.estimator.channels},
-        "Q_diag": _floats(Q),
+        "Q_diag": _floats(np.diag(np.asarray(est["Q"], dtype=float))) if "Q" in est else [],
         "lqr_Q": _floats(config.lqr_Q),
         "lqr_R": _floats(config.lqr_R),
-        "K": [_floats(row) for row in getattr(ctl, "K", np.zeros((0, 0)))],
-        "P": [_floats(row) for row in getattr(ctl, "P", np.zeros((0, 0)))],
+        "K": [_floats(row) for row in ctl.get("K", [])],
+        "P": [_floats(row) for row in ctl.get("P", [])],
+        "estimator": estimator,
         "controller": controller,
+        "components": parts,
+        "tables": tables,
+        "controllers": [{"name": n, "description": getattr(component("controller", n), "description", "")}
+                        for n in component_names("controller")],
     }
-    if hasattr(ctl, "Kp"):  # the DP controller: its gains per axis x, y, z, psi
-        out["dp"] = {"Kp": _floats(ctl.Kp), "Ki": _floats(ctl.Ki), "Kd": _floats(ctl.Kd), "M": _floats(ctl.M)}
-    summary = getattr(ctl, "summary", None)
-    if callable(summary):  # an adaptive controller's design (MRAC: reference model, gains, bounds)
-        out["mrac"] = summary()
+    for key in ("mrac", "dp"):  # the adaptive law's design, the DP gains per axis: the page's own views
+        if key in ctl:
+            out[key] = ctl[key]
     return out
 
 

@@ -700,16 +700,45 @@
 
   function controllerForm(box) {
     const current = hmi.docs.config.controller || "lqg";
-    box.appendChild(el("h4", { text: "Depth controller" }));
+    box.appendChild(el("h4", { text: "Controller" }));
+    // every registered controller, rovlab's and installed plugins' (rovlab.core.components)
+    const known = (hmi.loop && hmi.loop.controllers) || [{ name: "lqg", description: "LQR + bias estimate" },
+      { name: "mrac", description: "adaptive heave, heading on the LQR" }];
     const sel = el("select", {
       dataset: { key: "controller" },
       onchange: (ev) => send("set", { target: "config", key: "controller", value: ev.target.value })
         .catch((e) => { toast(e.message, true); ev.target.value = current; }),
-    }, el("option", { value: "lqg", text: "LQG: LQR + bias estimate" }),
-    el("option", { value: "mrac", text: "MRAC: adaptive heave, heading on the LQR" }));
+    }, ...known.map((c) => el("option", { value: c.name, text: c.description ? `${c.name}: ${c.description}` : c.name })));
     sel.value = current;
     box.appendChild(sel);
-    if ((hmi.loop && hmi.loop.controller) === "mrac") mracForm(box);
+    const running = hmi.loop && hmi.loop.controller;
+    if (running === "mrac") mracForm(box);
+    else if (running && hmi.loop.tables && hmi.loop.tables[running]) componentTableForm(box, running, `${running} (its [${running}] table; empty: default, shown grey)`);
+  }
+
+  // A component's own table of the design file ([dp], [ekf], a plugin's [pd]), as fields: its
+  // numbers (defaults shown grey) and the per-axis tables the file gives. Any component, shipped or
+  // not, gets this form from what it declares (hmi.loop.tables: the values in use).
+  function componentTableForm(box, name, title) {
+    const inUse = (hmi.loop && hmi.loop.tables && hmi.loop.tables[name]) || {};
+    const doc = hmi.docs.config[name] || {};
+    const extra = () => (hmi.docs.config[name] && hmi.docs.config[name].source) ? {} : { [`${name}.source`]: "tuned in the rovlab HMI" };
+    const rows = [];
+    const seen = new Set();
+    for (const [k, v] of Object.entries(inUse)) {
+      if (k === "source" || typeof v !== "number") continue;
+      seen.add(k);
+      rows.push({ key: `${name}.${k}`, label: k, unit: "SI", optional: true, placeholder: () => short(v, 4), extra });
+    }
+    for (const [k, v] of Object.entries(doc)) {  // per-axis tables as the file writes them, e.g. bandwidth = { x = 0.6 }
+      if (seen.has(k) || !v || typeof v !== "object" || Array.isArray(v)) continue;
+      for (const [sub, x] of Object.entries(v)) {
+        if (typeof x === "number") rows.push({ key: `${name}.${k}.${sub}`, label: `${k} ${sub}`, unit: "SI", optional: true, extra });
+      }
+    }
+    box.appendChild(el("h4", { text: title }));
+    if (rows.length) fieldRows(box, "config", rows);
+    else box.appendChild(el("p", { class: "hint", text: `[${name}] has no numbers to tune here` }));
   }
 
   function mracForm(box) {
@@ -734,6 +763,12 @@
       { key: "mrac.gain.D_q", label: "gain Γ_Dq", unit: "SI", optional: true, placeholder: gain(2), extra },
       { key: "mrac.gain.F", label: "gain Γ_F", unit: "SI", optional: true, placeholder: gain(3), extra },
     ]);
+  }
+
+  function estimatorTableForm() {
+    const name = hmi.loop && hmi.loop.estimator;
+    if (!name || !hmi.loop.tables || !hmi.loop.tables[name]) return;
+    componentTableForm($("form-observer"), name, `Estimator ${name} (its [${name}] table; empty: default, shown grey)`);
   }
 
   function lqrForm() {
@@ -816,6 +851,14 @@
         `sampled loop spectral radius ${short(a.sampled_radius, 3)}; a ${short(a.max_step)} m step takes ` +
         `${short(a.heave_force_needed[0], 3)} N down / ${short(a.heave_force_needed[1], 3)} N`;
     }
+    const ctl = loop.components && loop.components.controller;
+    if (ctl && !loop.dp && !loop.K.length) {  // a controller the page has no view of: what it declares
+      const lines = [`${ctl.name}: ${ctl.description || ""}`];
+      const show = Object.keys(ctl.summary || {}).length ? ctl.summary : (loop.tables && loop.tables[ctl.name]) || {};
+      for (const [k, v] of Object.entries(show)) lines.push(`${k} = ${Array.isArray(v) ? "[" + v.map((x) => short(x, 4)).join(", ") + "]" : (typeof v === "number" ? short(v, 4) : (typeof v === "object" ? JSON.stringify(v) : v))}`);
+      $("loop-lqr").textContent = lines.join("\n");
+      return;
+    }
     if (loop.dp) {  // dynamic positioning: the PID gains per axis (Fossen 2011, pole placement)
       const g = loop.dp;
       const axes = ["x", "y", "z", "ψ"];
@@ -852,7 +895,8 @@
       (d.config.measurements || []).map(measurementId), knownMeasurements.length,
       d.config.process_noise && d.config.process_noise.bias_time_per_mass !== undefined,
       d.config.lqr && d.config.lqr.state_max !== undefined,
-      d.config.controller || "lqg", hmi.loop && hmi.loop.controller,
+      d.config.controller || "lqg", hmi.loop && hmi.loop.controller, hmi.loop && hmi.loop.estimator,
+      Object.keys((hmi.loop && hmi.loop.tables) || {}).join(","),
     ]);
     if (signature !== formSignature) {
       formSignature = signature;
@@ -860,6 +904,7 @@
       vehicleForm("vehicle");
       vehicleForm("truth");
       observerForm();
+      estimatorTableForm();
       lqrForm();
     }
     const csel = document.querySelector('[data-key="controller"]');
