@@ -305,3 +305,36 @@ def test_the_observer_plant_comes_from_an_estimator_that_offers_its_model():
         prepare({**data, "plant": "observer"}, file=file)
     p = info.value.problems[0]
     assert p.key == "plant" and "estimator 'ekf' does not offer" in p.expected and "that do: kf" in p.expected
+
+
+@pytest.mark.parametrize("spec, says", [
+    (dict(state_names=("a", "b")), "state_names has 2 names for a state array of 1 entries"),
+    (dict(needs=("z", "depth")), "ControllerSpec.needs names 'depth', not in TRUTH"),
+    (dict(references=("depth",)), "ControllerSpec.references names 'depth', not in REFERENCE"),
+    (dict(outputs=("Z", "K")), "ControllerSpec.outputs names 'K', not in WRENCH"),
+])
+def test_a_components_specs_are_checked_by_name_before_anything_runs(monkeypatch, spec, says):
+    """A new component's mistakes in what its build returns are named when the design is made (the
+    state names once ran a whole run and then raised an IndexError in the results)."""
+    from rovlab.sim.designs import make_design
+
+    def build(vehicle, config):
+        base = dict(kernel=HoldDepth(40.0, 4.0, 60.0, config.sample_time, np.zeros(1)), needs=("z", "w", "b_Z"),
+                    references=("z",), outputs=("Z",), state_names=("depth_integral",))
+        return ControllerSpec(**{**base, **spec})
+
+    monkeypatch.setitem(_COMPONENTS["controller"], "bad", ComponentInfo("bad", "controller", build))
+    from rovlab.params.vehicle import load_vehicle
+
+    cfg = design_config_from_dict(read_toml(packaged_config_path("thesis")), file="thesis.toml")
+    with pytest.raises(TypeError, match="controller 'bad'") as info:
+        make_design(load_vehicle("udrone"), cfg, plant="process", plant_step=0.01, controller="bad")
+    assert says in str(info.value) and "docs/architecture.md" in str(info.value)
+
+
+def test_an_unregistered_component_type_says_how_to_register_it():
+    class Stray(NamedTuple):
+        state: np.ndarray
+
+    with pytest.raises(TypeError, match="register_controller"):
+        state_fields(Stray(np.zeros(0)))

@@ -126,7 +126,9 @@ def state_fields(component: Any) -> tuple[str, ...]:
     try:
         return _STATE[type(component)]
     except KeyError:
-        raise TypeError(f"{type(component).__name__} is not a registered component") from None
+        raise TypeError(f"{type(component).__name__} is not a registered component: its module must call "
+                        "rovlab.core.components.register_estimator, register_controller or register_plant for it, "
+                        "naming its state fields (docs/architecture.md, step 3)") from None
 
 
 def plant_draws(plant: Any) -> int:
@@ -391,7 +393,8 @@ def component(kind: str, name: str) -> ComponentInfo | None:
         register_component(loaded)
     info = _COMPONENTS[kind].get(name)
     if info is None:
-        _FAILED[kind][name] = "its module declared no component of that name (register_component)"
+        _FAILED[kind][name] = (f"its module was imported but declared no {kind} named {name!r}: it must end with "
+                               f"register_component(ComponentInfo({name!r}, {kind!r}, build, ...))")
     return info
 
 
@@ -404,7 +407,7 @@ def unknown_component(kind: str, name: str) -> str:
     """What to say of an estimator or controller name that :func:`component` did not find."""
     why = load_failure(kind, name)
     if why is not None:
-        return f"a component that loads ({kind} {name!r} failed to: {why})"
+        return f"a {kind} that loads; {kind} {name!r} did not: {why}"
     return "one of: " + ", ".join(component_names(kind))
 
 

@@ -210,7 +210,7 @@ def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path,
 def _print_mc(summary: dict[str, Any]) -> None:
     n = summary["runs"]
     print(f"Monte Carlo: {n} runs in {summary['wall_time_s']:.2f} s"
-          + (f" ({summary['vehicle_steps_per_s'] / 1e6:.1f} M vehicle-steps/s)" if summary.get("vehicle_steps_per_s") else "")
+          + (f" ({summary['vehicle_steps_per_s'] / 1e6:.3g} M vehicle-steps/s)" if summary.get("vehicle_steps_per_s") else "")
           + (" -- interrupted, partial results kept" if summary.get("interrupted") else ""))
     nees = summary.get("nees")
     if nees:

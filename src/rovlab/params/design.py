@@ -93,7 +93,7 @@ from typing import Any
 
 import numpy as np
 
-from rovlab.core.components import KINDS, component, component_names, unknown_component
+from rovlab.core.components import KINDS, component, component_names, load_failure, unknown_component
 from rovlab.core.weights import bryson_diagonal
 from rovlab.params.validate import Collector, ConfigError, PackagedFiles, Problem, TableReader, read_toml
 from rovlab.params.vehicle import PLAUSIBLE, SENSOR_CHANNELS, Sensor, Vehicle
@@ -360,8 +360,9 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
                 continue
             info = component(kind, cname)
             if info is None or info.parse_table is None:
-                top.problem(cname, "a table", f"no such table: {kind} {cname!r} "
-                            + ("has none" if info is not None else unknown_component(kind, cname)))
+                top.problem(cname, "a table", f"no such table: {kind} {cname!r} has none" if info is not None
+                            else f"the table of a {kind} that loads; {kind} {cname!r} did not: "
+                                 f"{load_failure(kind, cname)}")
                 top.raw(cname, None)
                 continue
             tables[cname] = info.parse_table(top.table(cname))
