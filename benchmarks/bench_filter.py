@@ -223,7 +223,7 @@ def whole_process() -> None:
     import tempfile
 
     from rovlab.estimation.filtering import DepthHeadingFilter
-    from rovlab.io.logs import ChunkWriter
+    from rovlab.io.logwriter import ChunkWriter
 
     global N
     filt = DepthHeadingFilter.from_files("udrone", "default")

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from rovlab.interfaces.cli import main
-from rovlab.io.logs import read_log, write_csv
+from rovlab.io.logreader import read_log
+from rovlab.io.logwriter import write_csv
 from rovlab.params.design import packaged_config_path
 
 

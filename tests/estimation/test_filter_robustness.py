@@ -10,7 +10,7 @@ import pytest
 from rovlab.estimation.filtering import DepthHeadingFilter
 from rovlab.estimation.streaming import StreamingFilter, plan_steps, steps_between
 from rovlab.interfaces.cli import main
-from rovlab.io.logs import read_log
+from rovlab.io.logreader import read_log
 from rovlab.params.design import packaged_config_path
 
 HEADER = "time_s,tau_Z,tau_N,z_qualisys,z_pressure,psi_qualisys"

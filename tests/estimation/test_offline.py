@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from rovlab.interfaces.cli import main
-from rovlab.io.logs import read_log
+from rovlab.io.logreader import read_log
 
 
 def test_the_ekf_replays_a_dp_run_with_the_estimates_it_had_in_the_loop(tmp_path, capsys):

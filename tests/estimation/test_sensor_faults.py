@@ -14,7 +14,8 @@ import pytest
 
 from rovlab.estimation.model import build_filter_model
 from rovlab.interfaces.cli import main
-from rovlab.io.logs import read_log, write_csv
+from rovlab.io.logreader import read_log
+from rovlab.io.logwriter import write_csv
 from rovlab.params.design import load_design_config
 from rovlab.params.vehicle import load_vehicle
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rovlab.interfaces.hmi.log import SessionLog
-from rovlab.io.logs import read_log
+from rovlab.io.logreader import read_log
 from rovlab.sim.live import LiveSimulation
 
 

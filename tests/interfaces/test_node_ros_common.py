@@ -289,7 +289,7 @@ def test_rovlab_filter_replays_a_node_recording(tmp_path, capsys):
     achieved wrench gives the node's own estimates (the same filter, the same inputs)."""
     from rovlab.interfaces.cli import main
     from rovlab.interfaces.node.record import NodeRecorder
-    from rovlab.io.logs import read_log
+    from rovlab.io.logreader import read_log
     from rovlab.io.timeseries import read_mcap_columns
 
     core = NodeCore(load_vehicle("udrone"), load_design_config("default"), log=lambda m: None)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rovlab.io.csvtext import csv_rows, format_float
-from rovlab.io.logs import round_significant
+from rovlab.io.logwriter import round_significant
 
 
 def _values() -> np.ndarray:
@@ -80,7 +80,7 @@ def test_refusals(columns, needle):
 def test_chunk_writer_writes_the_same_bytes_without_pyarrow(tmp_path, monkeypatch):
     import sys
 
-    from rovlab.io.logs import ChunkWriter
+    from rovlab.io.logwriter import ChunkWriter
 
     def write(path):
         with ChunkWriter(path, ["time_s", "x", "s"], significant=10, exact=["time_s"]) as w:

@@ -8,7 +8,7 @@ import threading
 import numpy as np
 import pytest
 
-from rovlab.io.logs import LogStream
+from rovlab.io.logreader import LogStream
 from rovlab.params.validate import ConfigError
 
 pytest.importorskip("pyarrow")

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rovlab.io.logs import ChunkWriter, LogStream, parse_log, read_log, round_significant, write_csv
+from rovlab.io.logreader import LogStream, parse_log, read_log
+from rovlab.io.logwriter import ChunkWriter, round_significant, write_csv
 from rovlab.params.validate import ConfigError
 
 REQUIRED = ("tau_Z", "tau_N", "z_qualisys")

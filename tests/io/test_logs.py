@@ -7,7 +7,8 @@ import io
 import numpy as np
 import pytest
 
-from rovlab.io.logs import parse_log, read_log, write_csv
+from rovlab.io.logreader import parse_log, read_log
+from rovlab.io.logwriter import write_csv
 from rovlab.params.validate import ConfigError
 
 REQUIRED = ("tau_Z", "tau_N", "z_qualisys")

@@ -20,7 +20,7 @@ from rovlab.core.components import (
     state_fields,
     state_of,
 )
-from rovlab.io.logs import read_log
+from rovlab.io.logreader import read_log
 from rovlab.params.design import design_config_from_dict, packaged_config_path
 from rovlab.params.validate import ConfigError, read_toml
 from rovlab.sim.live import LiveSimulation

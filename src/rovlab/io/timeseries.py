@@ -1,7 +1,7 @@
 """Time-series logs of a run (simulated or real) as MCAP, for ROS 2 tools, Foxglove and replay.
 
 A log is an ordered mapping column name -> 1-D array of equal length, with ``time_s`` first (its
-CSV form is written by :func:`rovlab.io.logs.write_csv`). A run's MCAP is two files:
+CSV form is written by :func:`rovlab.io.logwriter.write_csv`). A run's MCAP is two files:
 
 * ``RUN.mcap``, a ROS 2 bag: only ROS 2 messages (CDR, ``ros2msg`` definitions, profile
   ``ros2``) -- odometry of the truth and of the estimate, the wrench, /tf -- which rosbags,

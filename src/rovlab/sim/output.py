@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from rovlab.io.logs import write_csv
+from rovlab.io.logwriter import write_csv
 from rovlab.io.messages import order_columns
 from rovlab.io.report import write_figures, write_nees_figure, write_report_html
 from rovlab.io.timeseries import series_path, write_mcap

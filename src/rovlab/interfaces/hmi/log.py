@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from rovlab.core.files import atomic_write_text
-from rovlab.io.logs import write_csv
+from rovlab.io.logwriter import write_csv
 from rovlab.io.messages import SENSOR_STATUS, order_columns, status_words
 from rovlab.io.timeseries import series_path, write_mcap
 

@@ -256,7 +256,7 @@ def write_filter_log(log: str | Path, vehicle: Vehicle, model: Any, out: str | P
                      surface_hpa: float | None = None) -> dict[str, Any]:
     """Convert a .tlog/.mcap into the CSV ``rovlab filter`` reads (model: the filter model, for its
     channels and sample time); returns a summary (rows, samples per channel)."""
-    from rovlab.io.logs import write_csv
+    from rovlab.io.logwriter import write_csv
 
     records = read_records(log)
     cols = filter_columns(records, vehicle, tuple(model.channels), float(model.h), surface_hpa=surface_hpa,
