@@ -31,10 +31,12 @@ $(ROS2_STAMP): pyproject.toml
 ros2-env: $(ROS2_STAMP)
 
 # ROS 1 from Debian's packages (root and apt needed; skipped with a message otherwise), rovlab in a
-# venv of Debian's Python that sees them (--system-site-packages; the venv's numpy/numba win)
+# venv of Debian's Python that sees them (--system-site-packages; the venv's numpy/numba win);
+# installed again when pyproject.toml changes (new dependencies), like .venv-ros2
 ros1-env:
 	./scripts/ensure-ros1.sh
-	@if /usr/bin/python3 -c 'import rospy' 2>/dev/null && [ ! -f $(VENV_ROS1)/.installed ]; then \
+	@if /usr/bin/python3 -c 'import rospy' 2>/dev/null && \
+	  { [ ! -f $(VENV_ROS1)/.installed ] || [ pyproject.toml -nt $(VENV_ROS1)/.installed ]; }; then \
 	  /usr/bin/python3 -m venv --system-site-packages $(VENV_ROS1) && \
 	  $(VENV_ROS1)/bin/pip install --quiet -e '.[log]' && touch $(VENV_ROS1)/.installed; fi
 

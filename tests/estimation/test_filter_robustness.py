@@ -213,19 +213,3 @@ def test_fuzz_filter_logs_small_budget(capsys, tmp_path):
 def test_fuzz_filter_logs_long(capsys, tmp_path):
     _fuzz(capsys, tmp_path, n=3000, seed=15)
 
-
-def test_filter_without_pyarrow_gives_the_same_file(capsys, tmp_path, monkeypatch):
-    import sys
-
-    rows = _rows(200)
-    rows[50] = "5.000000,0,0,,1.05,inf"
-    path = _write(tmp_path / "log.csv", rows)
-    code, _, err = run(capsys, "filter", str(path), "--out", str(tmp_path / "fast.csv"))
-    assert code == 0, err
-    monkeypatch.setitem(sys.modules, "pyarrow", None)  # as without the 'arrow' extra
-    code, _, err = run(capsys, "filter", str(path), "--out", str(tmp_path / "plain.csv"))
-    assert code == 0, err
-    fast, plain = read_log(tmp_path / "fast.csv"), read_log(tmp_path / "plain.csv")
-    for c in fast.data:
-        np.testing.assert_array_equal(plain[c], fast[c])
-    assert plain.text == fast.text

@@ -1,4 +1,4 @@
-"""LogStream's reader thread (with pyarrow): chunks in order, a refusal raised where it occurs in
+"""LogStream's reader thread: chunks in order, a refusal raised where it occurs in
 the sequence after the chunks before it, and a thread that stops when the consumer does."""
 
 from __future__ import annotations
@@ -10,8 +10,6 @@ import pytest
 
 from rovlab.io.logreader import LogStream
 from rovlab.params.validate import ConfigError
-
-pytest.importorskip("pyarrow")
 
 HEADER = "time_s,tau_Z,tau_N,z_qualisys"
 

@@ -217,7 +217,7 @@ def _filter(args: argparse.Namespace, vehicle, config, filt, inputs: tuple[str, 
     # has none (a depth-and-heading controller's log commands neither)
     absent = tuple(c for c in inputs if c not in header and c not in INPUT_COLUMNS)
     stream = LogStream(log, required=("time_s",) + tuple(c for c in inputs if c not in absent) + tuple(source.values()))
-    chunks = iter(stream)  # with pyarrow a reader thread parses ahead from here (while the kernels load)
+    chunks = iter(stream)  # a reader thread parses ahead from here (while the kernels load)
     try:
         return _filter_chunks(args, vehicle, config, filt, inputs, absent, stream, chunks, columns, source)
     finally:

@@ -1,4 +1,4 @@
-"""Reading time-stamped CSV logs, every problem named with its line (the writers: rovlab.io.logwriter).
+"""Reading time-stamped CSV logs through pyarrow's CSV reader, every problem named with its line.
 
 Log format (what ``rovlab filter`` reads and what the simulator writes): UTF-8 text (a
 byte-order mark is ignored), optional ``#`` comment lines, one header line of comma-separated
@@ -6,15 +6,16 @@ column names, then one row per sample. One column is the time (``time_s`` by def
 and strictly increasing. Every other cell is a number, ``nan``, ``inf``/``-inf``, or empty;
 empty and ``nan`` both mean "no value at this time" (a sensor that did not deliver a sample),
 ``inf`` is kept (a faulty sample). Extra columns are allowed and kept. Blank lines are skipped,
-CRLF line endings are accepted.
+CRLF line endings are accepted, cells may be quoted (``"a,b"``) but not span lines.
 
-Every problem is a :class:`rovlab.params.validate.ConfigError` naming the file, the line and
-the column, e.g. ``log.csv: line 7, column 'z_pressure': got 'abc'; expected a number``.
+pyarrow splits and parses the rows (:mod:`rovlab.io.csvfile`); what it read is then checked
+column by column, and every problem is a :class:`rovlab.params.validate.ConfigError` naming the
+file, the line and the column, e.g. ``log.csv: line 7, column 'z_pressure': got 'abc'; expected
+a number``.
 """
 
 from __future__ import annotations
 
-import csv
 import math
 import queue
 import threading
@@ -25,11 +26,20 @@ from typing import Any
 
 import numpy as np
 
-from rovlab.io.tables import NUMBER_EXPECTED, RANGE_EXPECTED, number_problem, parse_number, scan_csv  # noqa: F401
+from rovlab.io.csvfile import DATA, Rows, bools, comments, float_array, header_cells, read_rows, split_lines, strings
 from rovlab.params.validate import ConfigError, Problem
 
 _MAX_PROBLEMS = 20
-_MISSING = {"", "nan", "NaN", "NAN", "na", "NA"}
+MISSING = ("", "nan", "NaN", "NAN", "na", "NA")  # no value at this time
+# A number as C, CSV readers and spreadsheets write one (RE2, as pyarrow's compute functions take
+# it): ASCII digits, optional sign, point and exponent, or inf/infinity. Python's float() also
+# takes '1_000' and non-ASCII digits ('１２'), which no other tool reads as numbers: refused.
+NUMBER = r"^[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:inf|infinity))$"
+NUMBER_EXPECTED = "a number (ASCII digits, e.g. 1.5e-3; or empty / nan for no value)"
+RANGE_EXPECTED = "a number within +-1.8e308 (inf is written inf)"
+_BOM = "\ufeff".encode()
+
+
 @dataclass(frozen=True, eq=False)
 class Log:
     """The columns of one log as float arrays (NaN = no value), with the file line of each row."""
@@ -66,15 +76,17 @@ def read_log(path: str | Path, *, required: Sequence[str] = (), time_column: str
     path = Path(path)
     file = str(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        data = path.read_bytes()
     except FileNotFoundError:
         raise ConfigError([Problem(file, "", "no such file", "an existing CSV log")], "log") from None
     except IsADirectoryError:
         raise ConfigError([Problem(file, "", "a directory", "a CSV log file")], "log") from None
+    try:
+        data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ConfigError([Problem(file, "", "undecodable bytes",
                                    f"UTF-8 text ({exc.reason} at byte {exc.start})")], "log") from None
-    return parse_log(text, file=file, required=required, time_column=time_column)
+    return _parse(data, file, required, time_column)
 
 
 def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
@@ -84,73 +96,96 @@ def parse_log(text: str, *, file: str = "<text>", required: Sequence[str] = (),
     The time and the ``required`` columns must hold numbers (or no value); any other column is
     read as numbers when every cell is one, and kept as text otherwise (``Log.text``).
     """
-    text = text.removeprefix("\ufeff")
-    comments, header, header_line, rows, row_lines = scan_csv(text, split=_split)
-    header = [c.strip() for c in header] if header is not None else None
+    return _parse(text.encode("utf-8", errors="surrogatepass"), file, required, time_column)
 
+
+def _parse(data: bytes, file: str, required: Sequence[str], time_column: str) -> Log:
+    data = data.removeprefix(_BOM)
+    lines = split_lines(data)
+    found = np.flatnonzero(lines.kind == DATA)
     need = [time_column] + [c for c in required if c != time_column]
+    header = None
+    if found.size:
+        h = int(found[0])
+        header = [c.strip() for c in header_cells(data[lines.start[h]:lines.end[h]])]
+    header_line = int(found[0]) + 1 if found.size else 0
     _check_header(file, header, header_line, need)
     assert header is not None  # _check_header refuses a file without one
-    if not rows:
+    rest = data[lines.start[header_line]:] if header_line < len(lines) else b""
+    rows = read_rows(rest, header, file=file, first_line=header_line)
+    if not len(rows) and not rows.problems:
         raise ConfigError([Problem(file, "", "no data rows", "at least one row after the header")], "log")
-
-    n = len(header)
-    problems: list[Problem] = []
-    values = np.full((len(rows), n), np.nan)
-    it = header.index(time_column)
-    strict = {header.index(c) for c in need}
-    text_cols: dict[int, list[str]] = {}
-    for r, (cells, number) in enumerate(zip(rows, row_lines)):
-        if len(cells) > n and not any(c.strip() for c in cells[n:]):
-            cells = cells[:n]
-        if len(cells) != n:
-            problems.append(Problem(file, f"line {number}", f"{len(cells)} fields",
-                                    f"{n} fields, one per column ({', '.join(header)})"))
+    problems = list(rows.problems)
+    values: dict[str, np.ndarray] = {}
+    texts: dict[str, list[str]] = {}
+    for j, name in enumerate(header):
+        column = _Column(rows, name, j, file)
+        if name in need:
+            values[name] = column.strict(problems, is_time=name == time_column)
+        elif column.bad.any():
+            texts[name] = column.text.to_pylist()
         else:
-            for c, cell in enumerate(cells):
-                text_cell = cell.strip()
-                if c in text_cols:
-                    continue
-                if text_cell in _MISSING:
-                    if c == it:
-                        problems.append(Problem(file, f"line {number}, column {time_column!r}",
-                                                text_cell or "(empty)", "a time in seconds"))
-                    continue
-                x = parse_number(text_cell)
-                if x is None:
-                    if c in strict:
-                        problems.append(Problem(file, f"line {number}, column {header[c]!r}", text_cell,
-                                                number_problem(text_cell)))
-                    else:
-                        text_cols[c] = []
-                    continue
-                if c == it and not math.isfinite(x):
-                    problems.append(Problem(file, f"line {number}, column {time_column!r}", text_cell,
-                                            "a finite time in seconds"))
-                values[r, c] = x
-        if len(problems) >= _MAX_PROBLEMS:
-            break
+            values[name] = column.value
     if len(problems) < _MAX_PROBLEMS:
-        t = values[:, it]  # NaN where the time itself was bad (already reported)
-        for r in (np.flatnonzero(np.diff(t) <= 0) + 1).tolist():
+        t = values[time_column]  # NaN where the time itself was bad (already reported)
+        for r in (np.flatnonzero(np.diff(t) <= 0) + 1)[:_MAX_PROBLEMS + 1].tolist():
             what = "repeats" if t[r] == t[r - 1] else "goes back from"
-            problems.append(Problem(file, f"line {row_lines[r]}, column {time_column!r}", float(t[r]),
-                                    f"strictly increasing times (it {what} {float(t[r - 1])!r} on line "
-                                    f"{row_lines[r - 1]})"))
-            if len(problems) >= _MAX_PROBLEMS:
-                break
-    if len(problems) >= _MAX_PROBLEMS:
-        problems.append(Problem(file, "", "more problems", f"(stopped after the first {_MAX_PROBLEMS})"))
-    if problems:
-        raise ConfigError(problems, "log")
-    data = {name: values[:, i].copy() for i, name in enumerate(header) if i not in text_cols}
-    texts = {header[c]: [_unquote(cells[c]) for cells in rows] for c in text_cols}
-    return Log(file=file, columns=tuple(header), data=data, lines=np.asarray(row_lines, dtype=np.int64),
-               comments=tuple(comments), time_column=time_column, text=texts)
+            line = int(rows.lines[r])
+            problems.append((line, header.index(time_column), Problem(
+                file, f"line {line}, column {time_column!r}", float(t[r]),
+                f"strictly increasing times (it {what} {float(t[r - 1])!r} on line {int(rows.lines[r - 1])})")))
+    _raise(problems)
+    return Log(file=file, columns=tuple(header), data=values, lines=rows.lines, comments=tuple(comments(data, lines)),
+               time_column=time_column, text=texts)
 
 
-def _split(line: str) -> list[str]:
-    return next(csv.reader([line])) if '"' in line else line.split(",")
+class _Column:
+    """The cells of one column read as strings: the text (stripped), which are missing values,
+    which are numbers (and their value, NaN otherwise), which are out of range (1e400)."""
+
+    def __init__(self, rows: Rows, name: str, index: int, file: str) -> None:
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        self.rows, self.name, self.index, self.file = rows, name, index, file
+        self.text = pc.utf8_trim_whitespace(rows.cells[name])
+        self.missing = bools(pc.is_in(self.text, value_set=strings(MISSING)))
+        number = pc.match_substring_regex(self.text, NUMBER)
+        self.number = bools(number)
+        self.value = np.full(self.number.size, np.nan)
+        self.overflow = np.zeros(self.number.size, dtype=bool)
+        if self.number.any():
+            self.value[self.number] = float_array(pc.cast(pc.filter(self.text, number), pa.float64()))
+            inf = np.isinf(self.value)
+            if inf.any():  # 1e400 is out of range, not 'inf'
+                self.overflow = inf & ~bools(pc.match_substring(self.text, "n", ignore_case=True))
+                self.value[self.overflow] = np.nan
+                self.number &= ~self.overflow
+        self.bad = ~self.missing & ~self.number
+
+    def cell(self, r: int) -> str:
+        return str(self.text[r].as_py())
+
+    def strict(self, problems: list[tuple[int, int, Problem]], *, is_time: bool = False) -> np.ndarray:
+        """The values; a problem for each cell that is not a number (up to the limit), and for a
+        time: no value or not finite."""
+        value = self.value
+        bad = self.bad | (self.missing if is_time else False)
+        if is_time:
+            bad = bad | (self.number & ~np.isfinite(value))
+            value = np.where(np.isfinite(value), value, np.nan)
+        for r in np.flatnonzero(bad)[:_MAX_PROBLEMS + 1].tolist():
+            text = self.cell(r)
+            if self.missing[r]:
+                expected = "a time in seconds"
+                text = text or "(empty)"
+            elif self.number[r]:
+                expected = "a finite time in seconds"
+            else:
+                expected = RANGE_EXPECTED if self.overflow[r] else NUMBER_EXPECTED
+            line = int(self.rows.lines[r])
+            problems.append((line, self.index, Problem(self.file, f"line {line}, column {self.name!r}", text, expected)))
+        return value
 
 
 def _check_header(file: str, header: list[str] | None, header_line: int, need: Sequence[str]) -> None:
@@ -173,6 +208,17 @@ def _check_header(file: str, header: list[str] | None, header_line: int, need: S
                                 f"columns {', '.join(need)} (missing: {', '.join(missing)}){hint}"))
     if problems:
         raise ConfigError(problems, "log")
+
+
+def _raise(problems: list[tuple[int, int, Problem]]) -> None:
+    """Raise the problems in the order of the file (line, then column), the first 20."""
+    if not problems:
+        return
+    ordered = [p for _, _, p in sorted(problems, key=lambda item: item[:2])]
+    if len(ordered) > _MAX_PROBLEMS:
+        ordered = ordered[:_MAX_PROBLEMS] + [Problem(ordered[0].file, "", "more problems",
+                                                     f"(stopped after the first {_MAX_PROBLEMS})")]
+    raise ConfigError(ordered, "log")
 
 
 # --------------------------------------------------------------------------------------------
@@ -198,15 +244,17 @@ class LogStream:
     """The time and ``required`` columns of a log, read in chunks of about ``chunk_rows`` rows.
 
     Same format and the same refusals as :func:`read_log` (other columns are not read). The file
-    is read in blocks of whole lines (about 64 bytes a row), each parsed on its own, so memory
-    does not grow with the log. The fast path parses a block with pyarrow's CSV reader (the
-    ``arrow`` extra): numbers in C++. A block it cannot read, or with a cell it reads as inf or
-    NaN, or with times out of order, goes to the careful line scanner, which names the line and
-    column of each problem (up to 20 a block); without pyarrow the careful scanner reads every
-    block. Lines are counted only when a message needs one (:meth:`where`).
+    is read in blocks of whole lines (about 64 bytes a row), each parsed on its own by pyarrow,
+    so memory does not grow with the log. pyarrow first parses a block straight into numbers
+    (``fast``); a block it cannot read so, or with a comment or blank line, a cell it reads as
+    inf or NaN, or times out of order, is read again as text and checked cell by cell like
+    :func:`read_log` (up to 20 problems a block, each with its line and column). ``fast=False``
+    checks every block so. Lines are counted only when a message needs one (:meth:`where`).
 
-    Iterating raises :class:`ConfigError` at the first chunk with a problem; the chunks before
-    it have been yielded already, so a consumer writes its output somewhere temporary first.
+    The blocks are parsed on a reader thread, at most ``PREFETCH`` chunks ahead of the consumer
+    (pyarrow parses without the GIL); iterating raises :class:`ConfigError` at the first chunk
+    with a problem. The chunks before it have been yielded already, so a consumer writes its
+    output somewhere temporary first.
     """
 
     def __init__(self, path: str | Path, *, required: Sequence[str] = (), time_column: str = "time_s",
@@ -222,6 +270,7 @@ class LogStream:
         self._header_line = 0
         self.header = self._read_header()
         self.rows = 0  # rows yielded so far
+        self._last_t = (math.nan, 0)
 
     # -- header -------------------------------------------------------------------------------
     def _open_error(self, exc: OSError) -> ConfigError:
@@ -257,7 +306,7 @@ class LogStream:
                 if line.startswith("#"):
                     self.comments.append(line[1:].strip())
                     continue
-                header = [c.strip() for c in _split(line)]
+                header = [c.strip() for c in header_cells(line.encode("utf-8"))]
                 break
             self._data_start = f.tell()
         self._header_line = number
@@ -266,35 +315,38 @@ class LogStream:
         return header
 
     # -- line numbers (error path only) --------------------------------------------------------
-    def _data_lines(self, start_row: int = 0) -> Iterator[tuple[int, int, str]]:
-        """(row index, line number, text) of the data lines from ``start_row`` on."""
-        row = 0
-        number = self._header_line
+    def _blocks(self) -> Iterator[tuple[bytes, int]]:
+        """Blocks of whole lines after the header, with the number of lines before each."""
+        block_bytes = max(1 << 12, 64 * self.chunk_rows)
         with open(self.path, "rb") as f:
             f.seek(self._data_start)
-            for raw in f:
-                number += 1
-                if row < start_row:  # counting only: bytes, no decoding
-                    stripped = raw.strip()
-                    if stripped and not stripped.startswith(b"#"):
-                        row += 1
-                    continue
-                try:
-                    line = raw.decode("utf-8").strip()
-                except UnicodeDecodeError as exc:
-                    raise ConfigError([Problem(self.file, f"line {number}", "undecodable bytes",
-                                               f"UTF-8 text ({exc.reason})")], "log") from None
-                if not line or line.startswith("#"):
-                    continue
-                yield row, number, line
-                row += 1
+            line = self._header_line
+            rest = b""
+            while True:
+                block = f.read(block_bytes)
+                data = rest + block
+                if block:  # up to the last line break (a \r at the end may be half a \r\n)
+                    cut = max(data.rfind(b"\n"), data.rfind(b"\r", 0, len(data) - 1)) + 1
+                    if cut == 0:
+                        rest = data
+                        continue
+                    data, rest = data[:cut], data[cut:]
+                else:
+                    rest = b""
+                if data:
+                    yield data, line
+                    line += len(split_lines(data)) if b"\r" in data else data.count(b"\n") + (not data.endswith(b"\n"))
+                if not block:
+                    break
 
     def line_of(self, row: int) -> int | None:
         """File line of a data row (counted on demand: for messages)."""
-        for r, number, _ in self._data_lines(row):
-            if r == row:
-                return number
-            break
+        seen = 0
+        for data, line in self._blocks():
+            rows = np.flatnonzero(split_lines(data).kind == DATA)
+            if row < seen + rows.size:
+                return line + int(rows[row - seen]) + 1
+            seen += rows.size
         return None
 
     def where(self, row: int, column: str | None = None) -> str:
@@ -307,126 +359,72 @@ class LogStream:
 
     # -- chunks -------------------------------------------------------------------------------
     def __iter__(self) -> Iterator[LogChunk]:
-        """Blocks of whole lines (~``chunk_rows`` rows) parsed one at a time: memory stays flat.
+        """Blocks of whole lines (~``chunk_rows`` rows) parsed one at a time on a reader thread;
+        call ``close()`` on the iterator to stop it early."""
+        return _Prefetch(self._chunks(), PREFETCH)
 
-        With pyarrow the blocks are parsed on a reader thread, at most ``PREFETCH`` chunks ahead
-        of the consumer (pyarrow parses without the GIL, so this overlaps the consumer's work);
-        call ``close()`` on the iterator to stop it early. The careful scanner needs the GIL
-        throughout and runs in the consumer's thread."""
-        pa = None
-        if self._fast:
-            try:
-                import pyarrow
-                import pyarrow.csv  # noqa: F401
-                pa = pyarrow
-            except ImportError:
-                pa = None
-        chunks = self._chunks(pa)
-        return chunks if pa is None else _Prefetch(chunks, PREFETCH)
-
-    def _chunks(self, pa) -> Iterator[LogChunk]:
+    def _chunks(self) -> Iterator[LogChunk]:
         self.rows = 0
         self._last_t = (math.nan, 0)  # (time, line or 0 if unknown) of the last row yielded
-        block_bytes = max(1 << 12, 64 * self.chunk_rows)
-        with open(self.path, "rb") as f:
-            f.seek(self._data_start)
-            line = self._header_line  # lines before this block
-            rest = b""
-            while True:
-                block = f.read(block_bytes)
-                data = rest + block
-                if block:
-                    cut = data.rfind(b"\n") + 1
-                    if cut == 0:
-                        rest = data
-                        continue
-                    data, rest = data[:cut], data[cut:]
-                else:
-                    rest = b""
-                if data:
-                    chunk = self._parse_block(pa, data, line)
-                    if chunk is not None:
-                        yield chunk
-                    line += data.count(b"\n")
-                if not block:
-                    break
+        for data, line in self._blocks():
+            chunk = self._parse_block(data, line)
+            if chunk is not None:
+                yield chunk
         if self.rows == 0:
             raise ConfigError([Problem(self.file, "", "no data rows", "at least one row after the header")], "log")
 
-    def _parse_block(self, pa, data: bytes, line: int) -> LogChunk | None:
+    def _parse_block(self, data: bytes, line: int) -> LogChunk | None:
         """The rows of one block of whole lines (the first is line ``line + 1``)."""
-        if pa is not None:
-            csv_mod = pa.csv
-            try:
-                table = csv_mod.read_csv(
-                    pa.BufferReader(data), memory_pool=pa.system_memory_pool(),  # mimalloc keeps ~10 MiB more
-                    read_options=csv_mod.ReadOptions(column_names=self.header, use_threads=False),
-                    convert_options=csv_mod.ConvertOptions(
-                        include_columns=self.need, column_types={c: pa.float64() for c in self.need},
-                        null_values=sorted(_MISSING), strings_can_be_null=False, quoted_strings_can_be_null=True))
-            except pa.ArrowInvalid:
-                return self._careful_block(data, line)  # names the line and column of each problem
-            if table.num_rows == 0:
-                return None
-            values = {}
-            suspicious = np.zeros(table.num_rows, dtype=bool)
-            for c in self.need:
-                col = table.column(c)
-                parts = [_float_array(chunk) for chunk in col.chunks]
-                arr = parts[0] if len(parts) == 1 else np.concatenate(parts)
-                values[c] = arr
-                if c == self.time_column:
-                    suspicious |= ~np.isfinite(arr)
-                else:
-                    # inf, or NaN spelt other than as a missing value: the careful scanner decides
-                    if col.null_count != np.count_nonzero(np.isnan(arr)):
-                        suspicious |= np.isnan(arr)  # some NaN spelt otherwise than as a missing value
-                    suspicious |= np.isinf(arr)
-            if suspicious.any():
-                return self._careful_block(data, line)
-            t = values[self.time_column]
-            if np.any(np.diff(t) <= 0) or (self.rows and not t[0] > self._last_t[0]):
-                return self._careful_block(data, line)  # time order checked with line numbers
+        values = self._numbers(data) if self._fast else None
+        if values is not None:
             return self._chunk(values, None)
-        return self._careful_block(data, line)
+        return self._checked_block(data, line)
 
-    def _careful_block(self, data: bytes, line: int) -> LogChunk | None:
-        """The careful scanner on one block: every problem with its line and column (up to 20)."""
-        idx = [self.header.index(c) for c in self.need]
-        n = len(self.header)
-        problems: list[Problem] = []
-        rows: list[list[float]] = []
-        lines: list[int] = []
-        number = line
-        for raw in data.split(b"\n")[:-1] if data.endswith(b"\n") else data.split(b"\n"):
-            number += 1
-            try:
-                text = raw.decode("utf-8").strip()
-            except UnicodeDecodeError as exc:
-                problems.append(Problem(self.file, f"line {number}", "undecodable bytes", f"UTF-8 text ({exc.reason})"))
-                continue
-            if not text or text.startswith("#"):
-                continue
-            cells = _split(text)
-            if len(cells) > n and not any(c.strip() for c in cells[n:]):
-                cells = cells[:n]
-            if len(cells) != n:
-                problems.append(Problem(self.file, f"line {number}", f"{len(cells)} fields",
-                                        f"{n} fields, one per column ({', '.join(self.header)})"))
-            else:
-                row = []
-                for c, i in zip(self.need, idx):
-                    x = _cell_value(self.file, number, c, cells[i].strip(), c == self.time_column, problems)
-                    row.append(math.nan if x is None else x)
-                rows.append(row)
-                lines.append(number)
-            if len(problems) >= _MAX_PROBLEMS:
-                break
-        _raise(problems)
-        if not rows:
+    def _numbers(self, data: bytes) -> dict[str, np.ndarray] | None:
+        """The block parsed straight into numbers, or None if it needs the checked reading: pyarrow
+        could not, a row is not one line, or a value or the time order needs a closer look."""
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+
+        if data.startswith(b"#") or b"\n#" in data or b"\r#" in data:
+            return None  # comment lines
+        try:
+            table = pcsv.read_csv(
+                pa.BufferReader(data), memory_pool=pa.system_memory_pool(),  # mimalloc keeps ~10 MiB more
+                read_options=pcsv.ReadOptions(column_names=self.header, use_threads=False),
+                convert_options=pcsv.ConvertOptions(
+                    include_columns=self.need, column_types={c: pa.float64() for c in self.need},
+                    null_values=list(MISSING), strings_can_be_null=False, quoted_strings_can_be_null=True))
+        except pa.ArrowInvalid:
             return None
-        values = np.array(rows, dtype=float)
-        return self._chunk({c: values[:, j].copy() for j, c in enumerate(self.need)}, lines)
+        if table.num_rows != data.count(b"\n") + (not data.endswith(b"\n")):
+            return None  # blank lines, a lone \r or a quoted line break
+        values = {}
+        suspicious = False
+        for c in self.need:
+            col = table.column(c)
+            arr = float_array(col)
+            values[c] = arr
+            finite = np.isfinite(arr)
+            if c == self.time_column:
+                suspicious |= not finite.all()
+            elif not finite.all():  # inf, or NaN spelt other than as a missing value
+                suspicious |= bool(np.isinf(arr).any()) or col.null_count != np.count_nonzero(np.isnan(arr))
+        t = values[self.time_column]
+        if suspicious or np.any(np.diff(t) <= 0) or (self.rows and t.size and not t[0] > self._last_t[0]):
+            return None  # time order checked with line numbers
+        return values if t.size else None
+
+    def _checked_block(self, data: bytes, line: int) -> LogChunk | None:
+        """The block read as text and checked cell by cell: every problem with its line and column."""
+        rows = read_rows(data, self.header, file=self.file, first_line=line, include=self.need)
+        problems = list(rows.problems)
+        values = {c: _Column(rows, c, self.header.index(c), self.file).strict(problems, is_time=c == self.time_column)
+                  for c in self.need}
+        _raise(problems)
+        if not len(rows):
+            return None
+        return self._chunk(values, rows.lines.tolist())
 
     def _chunk(self, data: dict[str, np.ndarray], lines: list[int] | None) -> LogChunk:
         t = data[self.time_column]
@@ -442,12 +440,13 @@ class LogStream:
         full = np.concatenate([[prev_t], t]) if self.rows > 0 else t
         offset = 1 if self.rows > 0 else 0
         problems = []
-        for b in np.flatnonzero(np.diff(full) <= 0)[:_MAX_PROBLEMS]:
+        for b in np.flatnonzero(np.diff(full) <= 0)[:_MAX_PROBLEMS + 1]:
             r = int(b) + 1 - offset  # index in this block
             before = lines[r - 1] if r >= 1 else (prev_line or self.line_of(self.rows - 1))
             what = "repeats" if full[b + 1] == full[b] else "goes back from"
-            problems.append(Problem(self.file, f"line {lines[r]}, column {self.time_column!r}", float(full[b + 1]),
-                                    f"strictly increasing times (it {what} {float(full[b])!r} on line {before})"))
+            problems.append((lines[r], 0, Problem(
+                self.file, f"line {lines[r]}, column {self.time_column!r}", float(full[b + 1]),
+                f"strictly increasing times (it {what} {float(full[b])!r} on line {before})")))
         _raise(problems)
 
 
@@ -511,47 +510,3 @@ def _produce(items: Iterator[LogChunk], out: queue.Queue, stop: threading.Event)
         close = getattr(items, "close", None)
         if close is not None:
             close()
-
-
-def _float_array(chunk) -> np.ndarray:
-    """A pyarrow float64 array as numpy, nulls as NaN, read from its buffers (pyarrow's own
-    to_numpy imports pandas for arrays with nulls: 0.4 s)."""
-    n = len(chunk)
-    validity, data = chunk.buffers()[:2]
-    arr = np.frombuffer(data, dtype=np.float64, count=chunk.offset + n)[chunk.offset:]
-    if chunk.null_count:
-        bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
-        arr = np.where(bits[chunk.offset:chunk.offset + n].astype(bool), arr, np.nan)
-    return arr
-
-
-def _cell_value(file: str, number: int, column: str, text: str, is_time: bool,
-                problems: list[Problem]) -> float | None:
-    """One cell of a wanted column (None = no value), or a problem appended."""
-    if text in _MISSING:
-        if is_time:
-            problems.append(Problem(file, f"line {number}, column {column!r}", text or "(empty)",
-                                    "a time in seconds"))
-        return None
-    x = parse_number(text)
-    if x is None:
-        problems.append(Problem(file, f"line {number}, column {column!r}", text, number_problem(text)))
-        return None
-    if is_time and not math.isfinite(x):
-        problems.append(Problem(file, f"line {number}, column {column!r}", text, "a finite time in seconds"))
-        return None
-    return x
-
-
-def _raise(problems: list[Problem]) -> None:
-    if not problems:
-        return
-    if len(problems) >= _MAX_PROBLEMS:
-        problems = problems[:_MAX_PROBLEMS] + [Problem(problems[0].file, "", "more problems",
-                                                       f"(stopped after the first {_MAX_PROBLEMS})")]
-    raise ConfigError(problems, "log")
-
-
-def _unquote(cell: str) -> str:
-    return cell.strip()
-

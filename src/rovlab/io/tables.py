@@ -3,10 +3,12 @@
 Format: UTF-8 text (a byte-order mark is ignored), one header line of comma-separated column
 names, then one row of numbers per line. Lines starting with ``#`` are comments (the virtual lab
 writes its seed and true parameters there); blank lines are skipped; CRLF line endings and
-trailing empty fields (``1100,-2.90,``) are accepted. Every value must be a finite number.
+trailing empty fields (``1100,-2.90,``) are accepted. Every value must be a finite number. Cells
+are not quoted (a quote is a character like any other).
 
-Every problem is reported as a :class:`rovlab.params.validate.ConfigError` naming the file, the
-line and the column, so that command-line tools print it without a traceback::
+pyarrow reads the rows (:mod:`rovlab.io.csvfile`); every problem is reported as a
+:class:`rovlab.params.validate.ConfigError` naming the file, the line and the column, so that
+command-line tools print it without a traceback::
 
     runs.csv: line 7, column 'force_n': got 'abc'; expected a number
 """
@@ -14,9 +16,7 @@ line and the column, so that command-line tools print it without a traceback::
 from __future__ import annotations
 
 import json
-import math
-import re
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,15 +24,15 @@ from typing import Any
 import numpy as np
 
 from rovlab.core.files import atomic_write_text
+from rovlab.io.csvfile import DATA, bools, comments, float_array, header_cells, read_rows, split_lines
 from rovlab.params.validate import ConfigError, Problem
 
 _MAX_PROBLEMS = 20  # stop collecting after this many bad cells (the rest are likely the same)
 
-# A number as a lab instrument writes it: ASCII digits, optional sign, decimal point and
-# exponent. Python's float() also takes '1_000' and '１２' (other scripts' digits); those are
-# refused, as is anything that is not finite.
-_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:inf|infinity|nan)",
-                     re.IGNORECASE | re.ASCII)
+# A number as a lab instrument writes it (RE2, as pyarrow's compute functions take it): ASCII
+# digits, optional sign, decimal point and exponent. Python's float() also takes '1_000' and '１２'
+# (other scripts' digits); those are refused, as is anything that is not finite.
+_NUMBER = r"^(?i:[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:e[+-]?[0-9]+)?|[+-]?(?:inf|infinity|nan))$"
 
 # Plausible magnitudes of a lab log's values, by the unit suffix of the column name (SI; see
 # docs/identification.md). A fuzzer's times or positions scaled by 1e154 or 1e-300 used to end in
@@ -58,34 +58,6 @@ def column_limit(name: str) -> float:
         if name.endswith(suffix):
             return limit
     return DEFAULT_LIMIT
-
-
-# A number in a log (rovlab filter; io/logs.py), as C, CSV readers and spreadsheets write one: ASCII digits,
-# optional sign, point and
-# exponent, or inf/infinity. Python's float() also takes '1_000' and non-ASCII digits ('１２'),
-# which no other tool reads as numbers: such cells are refused.
-_LOG_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:inf|infinity))")
-NUMBER_EXPECTED = "a number (ASCII digits, e.g. 1.5e-3; or empty / nan for no value)"
-RANGE_EXPECTED = "a number within +-1.8e308 (inf is written inf)"
-
-
-def parse_number(text: str) -> float | None:
-    """The float a (stripped) CSV cell holds, or None if it is not a number in the log format.
-
-    Overflowing literals such as ``1e400`` are not numbers (they would silently become inf, which
-    in a log means a faulty sample): None too; the caller words the refusal.
-    """
-    if not _LOG_NUMBER.fullmatch(text):
-        return None
-    x = float(text)
-    if math.isinf(x) and "n" not in text.lower():
-        return None  # 1e400: out of range, not 'inf'
-    return x
-
-
-def number_problem(text: str) -> str:
-    """What was expected of a cell that parse_number refused."""
-    return RANGE_EXPECTED if _LOG_NUMBER.fullmatch(text) else NUMBER_EXPECTED
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,34 +120,6 @@ def _where(table: DataTable, row: int | None, column: str | None) -> str:
     return ", ".join(parts)
 
 
-def scan_csv(text: str, *, split: Callable[[str], list[str]]
-             ) -> tuple[list[str], list[str] | None, int, list[list[str]], list[int]]:
-    """Split CSV text into (comments, header cells, header line, data rows, their line numbers).
-
-    Blank lines are skipped and lines starting with '#' are comments; ``split`` turns one line
-    into cells (the readers differ in quoting and stripping). Line numbers start at 1.
-    """
-    comments: list[str] = []
-    header: list[str] | None = None
-    header_line = 0
-    rows: list[list[str]] = []
-    row_lines: list[int] = []
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if not line:
-            continue
-        if line.startswith("#"):
-            comments.append(line[1:].strip())
-            continue
-        cells = split(line)
-        if header is None:
-            header, header_line = cells, number
-            continue
-        rows.append(cells)
-        row_lines.append(number)
-    return comments, header, header_line, rows, row_lines
-
-
 def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "data file") -> DataTable:
     """Read a numeric CSV file; raise :class:`ConfigError` naming file, line and column on any problem.
 
@@ -185,7 +129,8 @@ def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "d
     path = Path(path)
     file = str(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        data = path.read_bytes()
+        data.decode("utf-8")
     except FileNotFoundError:
         raise ConfigError([Problem(file, "", "no such file", "an existing CSV file")], what) from None
     except IsADirectoryError:
@@ -193,14 +138,15 @@ def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "d
     except UnicodeDecodeError as exc:
         raise ConfigError([Problem(file, "", "undecodable bytes", f"UTF-8 text ({exc.reason} at byte "
                                    f"{exc.start})")], what) from None
-
-    comments, header, header_line, rows, row_lines = scan_csv(text, split=lambda line: [
-        c.strip() for c in line.split(",")])
-    header = _trim(header) if header is not None else None
-
-    if header is None:
+    data = data.removeprefix("\ufeff".encode())
+    lines = split_lines(data)
+    found = np.flatnonzero(lines.kind == DATA)
+    if not found.size:
         raise ConfigError([Problem(file, "", "an empty file", "a header line of column names, e.g. "
                                    + (", ".join(required) if required else "time_s, ..."))], what)
+    header_line = int(found[0]) + 1
+    header = _trim([c.strip() for c in header_cells(data[lines.start[header_line - 1]:lines.end[header_line - 1]],
+                                                    quoted=False)])
     problems: list[Problem] = []
     where_header = f"line {header_line} (header)"
     sep = next((s for s in (";", "\t") if s in header[0]), None) if len(header) == 1 else None
@@ -225,51 +171,64 @@ def read_table(path: str | Path, *, required: Sequence[str] = (), what: str = "d
         raise ConfigError([Problem(file, where_header, ", ".join(header),
                                    "columns " + ", ".join(required) + " (missing: " + ", ".join(missing) + ")")],
                           what)
-    if not rows:
+    rest = data[lines.start[header_line]:] if header_line < len(lines) else b""
+    rows = read_rows(rest, header, file=file, first_line=header_line, quoted=False, unit="values",
+                     max_problems=_MAX_PROBLEMS)
+    if not len(rows) and not rows.problems:
         raise ConfigError([Problem(file, "", "no data rows", "at least one row of numbers after the header")], what)
 
-    n = len(header)
-    limits = [column_limit(name) for name in header]
-    values = np.empty((len(rows), n))
-    for r, (cells, number) in enumerate(zip(rows, row_lines)):
-        if len(cells) > n and not any(cells[n:]):
-            cells = cells[:n]
-        if len(cells) != n:
-            problems.append(Problem(file, f"line {number}", f"{len(cells)} values",
-                                    f"{n} values, one per column ({', '.join(header)})"))
-        else:
-            for c, cell in enumerate(cells):
-                where = f"line {number}, column {header[c]!r}"
-                if not _NUMBER.fullmatch(cell):
-                    problems.append(Problem(file, where, cell or "(empty)", "a number (ASCII digits, e.g. 1000 "
-                                            "or 1.5e-3)"))
-                    continue
-                x = float(cell)
-                if not math.isfinite(x):
-                    problems.append(Problem(file, where, cell, "a finite number"))
-                elif abs(x) > limits[c]:
-                    problems.append(Problem(file, where, cell, f"a magnitude of at most {limits[c]:g} (the "
-                                            "plausible range of this column's unit, docs/identification.md)"))
-                elif x != 0 and abs(x) < TINY:
-                    problems.append(Problem(file, where, cell, f"0 or a magnitude of at least {TINY:g} (smaller "
-                                            "is below any instrument's resolution: were the values scaled?)"))
-                values[r, c] = x
-        if len(problems) >= _MAX_PROBLEMS:
-            problems.append(Problem(file, "", "more bad rows", "(stopped after the first "
-                                    f"{_MAX_PROBLEMS} problems)"))
-            break
-    if problems:
-        raise ConfigError(problems, what)
-    data = {name: values[:, i].copy() for i, name in enumerate(header)}
-    for arr in data.values():
+    found_problems = list(rows.problems)
+    data_columns = {name: _numbers(rows, name, c, file, found_problems) for c, name in enumerate(header)}
+    if found_problems:
+        ordered = [p for _, _, p in sorted(found_problems, key=lambda item: item[:2])]
+        if len(ordered) > _MAX_PROBLEMS:
+            ordered = ordered[:_MAX_PROBLEMS] + [Problem(file, "", "more bad rows",
+                                                         f"(stopped after the first {_MAX_PROBLEMS} problems)")]
+        raise ConfigError(ordered, what)
+    for arr in data_columns.values():
         arr.setflags(write=False)
-    lines = np.asarray(row_lines, dtype=int)
-    lines.setflags(write=False)
-    if not comments:  # metadata of files rovlab writes lives in a JSON sidecar (older files: '#' lines)
+    lines_of_rows = rows.lines.astype(int)
+    lines_of_rows.setflags(write=False)
+    notes = comments(data, lines)
+    if not notes:  # metadata of files rovlab writes lives in a JSON sidecar (older files: '#' lines)
         side = read_sidecar(path).get("comments")
         if isinstance(side, list):
-            comments = [str(c) for c in side]
-    return DataTable(file, tuple(header), data, lines, tuple(comments))
+            notes = [str(c) for c in side]
+    return DataTable(file, tuple(header), data_columns, lines_of_rows, tuple(notes))
+
+
+def _numbers(rows: Any, name: str, c: int, file: str, problems: list[tuple[int, int, Problem]]) -> np.ndarray:
+    """One column's values; a problem for each cell that is no finite, plausible number (the
+    first 20)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    text = pc.utf8_trim_whitespace(rows.cells[name])
+    matched = pc.match_substring_regex(text, _NUMBER)
+    number = bools(matched)
+    values = np.full(number.size, np.nan)
+    if number.any():
+        values[number] = float_array(pc.cast(pc.filter(text, matched), pa.float64()))
+    limit = column_limit(name)
+    with np.errstate(invalid="ignore"):
+        magnitude = np.abs(values)
+        bad = ~number | ~np.isfinite(values) | (magnitude > limit) | ((values != 0) & (magnitude < TINY))
+    for r in np.flatnonzero(bad)[:_MAX_PROBLEMS + 1].tolist():
+        line = int(rows.lines[r])
+        where = f"line {line}, column {name!r}"
+        cell = str(text[r].as_py())
+        if not number[r]:
+            problem = Problem(file, where, cell or "(empty)", "a number (ASCII digits, e.g. 1000 or 1.5e-3)")
+        elif not np.isfinite(values[r]):
+            problem = Problem(file, where, cell, "a finite number")
+        elif magnitude[r] > limit:
+            problem = Problem(file, where, cell, f"a magnitude of at most {limit:g} (the plausible range of this "
+                              "column's unit, docs/identification.md)")
+        else:
+            problem = Problem(file, where, cell, f"0 or a magnitude of at least {TINY:g} (smaller is below any "
+                              "instrument's resolution: were the values scaled?)")
+        problems.append((line, c, problem))
+    return values
 
 
 def _trim(cells: list[str]) -> list[str]:
