@@ -63,9 +63,12 @@ def test_parameter_list_and_set(vehicle):
     gcs, proc = vehicle
     gcs.seen.clear()
     gcs.conn.mav.param_request_list_send(1, 1)
-    gcs.wait_for(lambda: len({m.param_id for m in gcs.messages("PARAM_VALUE")}) >= 11, 10.0, what="all parameters")
+    gcs.wait_for(lambda: gcs.messages("PARAM_VALUE") and len({m.param_id for m in gcs.messages("PARAM_VALUE")})
+                 == gcs.messages("PARAM_VALUE")[0].param_count, 10.0, what="all parameters")
     values = {m.param_id: m for m in gcs.messages("PARAM_VALUE")}
-    assert values["SYSID_MYGCS"].param_value == 255
+    assert values["MAV_GCS_SYSID"].param_value == 255 and "SYSID_MYGCS" not in values  # ArduSub 4.7 names
+    assert values["FS_PILOT_INPUT"].param_value == 2 and values["FS_PILOT_INPUT"].param_type == 2  # INT8, as ArduSub
+    assert values["JS_GAIN_DEFAULT"].param_type == 9 and values["MOT_PWM_MIN"].param_type == 4  # REAL32, INT16
     assert values["JS_GAIN_DEFAULT"].param_count == len(values)
     assert sorted(m.param_index for m in values.values()) == list(range(len(values)))
 
@@ -103,28 +106,30 @@ def test_garbage_and_strangers_do_not_move_it(vehicle):
 def test_arm_fly_up_and_pilot_failsafe(vehicle):
     gcs, proc = vehicle
     param_set(gcs, "FS_PILOT_TIMEOUT", 0.5)
-    gcs.seen.clear()
-    gcs.conn.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)  # MAV_CMD_COMPONENT_ARM_DISARM
-    gcs.wait_for(lambda: any(m.command == 400 and m.result == 0 for m in gcs.messages("COMMAND_ACK")), 5.0,
-                 what="arming ACK")
-    gcs.wait_for(lambda: gcs.latest["HEARTBEAT"].base_mode & 128, 3.0, what="armed HEARTBEAT")
-    gcs.pump(0.3)
-    start = depth_of(gcs.latest["SCALED_PRESSURE2"])
+
+    def neutral() -> None:  # a pilot at neutral: pilot input keeps flowing, as from a joystick
+        gcs.conn.mav.manual_control_send(1, 0, 0, 500, 0, 0)
 
     def climb() -> None:
         gcs.conn.mav.manual_control_send(1, 0, 0, 1000, 0, 0)  # full throttle up (z: 500 neutral)
 
+    gcs.seen.clear()
+    gcs.conn.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)  # MAV_CMD_COMPONENT_ARM_DISARM
+    gcs.wait_for(lambda: any(m.command == 400 and m.result == 0 for m in gcs.messages("COMMAND_ACK")), 5.0,
+                 every=neutral, what="arming ACK")
+    gcs.wait_for(lambda: gcs.latest["HEARTBEAT"].base_mode & 128, 3.0, every=neutral, what="armed HEARTBEAT")
+    start = depth_of(gcs.latest["SCALED_PRESSURE2"])
     gcs.wait_for(lambda: depth_of(gcs.latest["SCALED_PRESSURE2"]) < start - 0.3, 20.0, every=climb,
                  what="depth decreasing under throttle up")
     servo = gcs.latest["SERVO_OUTPUT_RAW"]
     assert all(getattr(servo, f"servo{i}_raw") > 1550 for i in range(5, 9))  # vertical thrusters pushing up
 
-    # stop sending: after FS_PILOT_TIMEOUT the vehicle goes neutral on its own
+    # stop sending: after FS_PILOT_TIMEOUT the vehicle goes neutral and, with ArduSub's default
+    # FS_PILOT_INPUT = 2, disarms on its own
     gcs.wait_for(lambda: all(getattr(gcs.latest["SERVO_OUTPUT_RAW"], f"servo{i}_raw") == 1500 for i in range(1, 9)),
                  5.0, what="neutral outputs after the pilot-input failsafe")
+    gcs.wait_for(lambda: not gcs.latest["HEARTBEAT"].base_mode & 128, 3.0, what="disarmed by the failsafe")
     assert any("manual control" in m.text for m in gcs.messages("STATUSTEXT"))
-    gcs.conn.mav.command_long_send(1, 1, 400, 0, 0, 0, 0, 0, 0, 0, 0)
-    gcs.wait_for(lambda: not gcs.latest["HEARTBEAT"].base_mode & 128, 3.0, what="disarmed HEARTBEAT")
     assert proc.poll() is None
 
 

@@ -7,7 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from rovlab.interfaces.mavlink.ardusub import Parameters
+from rovlab.interfaces.mavlink.ardusub import (
+    PARAM_INT8,
+    PARAM_INT16,
+    PARAM_REAL32,
+    Parameters,
+    boot_gain,
+    sim_parameters,
+    stepped_gain,
+)
 from rovlab.interfaces.mavlink.units import (
     depth_from_pressure,
     heading_deg,
@@ -73,5 +81,40 @@ def test_parameters_refuse_bad_values_and_change_nothing():
     assert "read-only" in p.set("MOT_PWM_MIN", 1000)
     assert "unknown" in p.set("NOPE", 1)
     assert p["JS_GAIN_DEFAULT"] == 0.8
-    assert p.set("SYSID_MYGCS", 254.6) is None and p["SYSID_MYGCS"] == 255.0  # integers are rounded
+    assert p.set("MAV_GCS_SYSID", 254.6) is None and p["MAV_GCS_SYSID"] == 255.0  # integers are rounded
     assert all(len(s.name) <= 16 for s in p.specs)
+
+
+def test_two_generations_of_parameter_names_with_ardusubs_defaults_and_types():
+    """Defaults and MAV_PARAM_TYPEs as a BlueROV2 Heavy on ArduSub 4.1.1 reports them in its PARAM_VALUE
+    stream (../shared/data/ardusub/small.tlog: FS_PILOT_INPUT 2 INT8, FS_PILOT_TIMEOUT 3.0 REAL32,
+    JS_GAIN_DEFAULT 0.5 / MIN 0.25 / MAX 1.0 REAL32, JS_GAIN_STEPS 4 INT8, MOT_PWM_* INT16,
+    SYSID_THISMAV 1 / SYSID_MYGCS 255 INT16); ArduPilot 4.7 renamed the system ids (GCS.cpp var_info)."""
+    old = {s.name: s for s in sim_parameters("4.1")}
+    new = {s.name: s for s in sim_parameters("4.7")}
+    assert {"SYSID_THISMAV", "SYSID_MYGCS"} <= set(old) and not {"MAV_SYSID", "MAV_GCS_SYSID"} & set(old)
+    assert {"MAV_SYSID", "MAV_GCS_SYSID", "MAV_GCS_SYSID_HI"} <= set(new) and not {"SYSID_THISMAV", "SYSID_MYGCS"} & set(new)
+    for table in (old, new):
+        assert table["FS_PILOT_INPUT"].default == 2 and table["FS_PILOT_INPUT"].mav_type == PARAM_INT8
+        assert (table["FS_PILOT_TIMEOUT"].default, table["FS_PILOT_TIMEOUT"].high) == (3.0, 3.0)
+        assert table["JS_GAIN_STEPS"].mav_type == PARAM_INT8 and table["FRAME_CONFIG"].mav_type == PARAM_INT8
+        assert table["MOT_PWM_MIN"].mav_type == PARAM_INT16 and table["JS_THR_GAIN"].mav_type == PARAM_REAL32
+        assert (table["JS_GAIN_DEFAULT"].default, table["JS_GAIN_MIN"].default, table["JS_GAIN_MAX"].default) == \
+            (0.5, 0.25, 1.0)
+    assert old["SYSID_MYGCS"].mav_type == new["MAV_GCS_SYSID"].mav_type == PARAM_INT16
+    with pytest.raises(ValueError, match="firmware"):
+        sim_parameters("4.5")
+
+
+def test_pilot_gain_as_ardusub_keeps_it():
+    """ArduSub joystick.cpp: the boot gain is JS_GAIN_DEFAULT within JS_GAIN_MIN .. MAX, else the step
+    nearest the middle; each gain button press moves it by (MAX - MIN) / (STEPS - 1) within MIN .. MAX."""
+    assert boot_gain(0.5, 0.25, 1.0, 4) == 0.5
+    assert boot_gain(0.1, 0.25, 1.0, 4) == pytest.approx(0.5)  # outside: 0.25 + (4 // 2 - 1) * 0.75 / 3
+    assert boot_gain(0.1, 0.25, 1.0, 1) == 0.25  # one step: JS_GAIN_DEFAULT clamped
+    g = stepped_gain(0.5, True, gain_default=0.5, gain_min=0.25, gain_max=1.0, steps=4)
+    assert g == pytest.approx(0.75)
+    assert stepped_gain(g, True, gain_default=0.5, gain_min=0.25, gain_max=1.0, steps=4) == pytest.approx(1.0)
+    assert stepped_gain(1.0, True, gain_default=0.5, gain_min=0.25, gain_max=1.0, steps=4) == 1.0
+    assert stepped_gain(0.25, False, gain_default=0.5, gain_min=0.25, gain_max=1.0, steps=4) == 0.25
+    assert stepped_gain(0.8, True, gain_default=0.5, gain_min=0.25, gain_max=1.0, steps=1) == 0.5

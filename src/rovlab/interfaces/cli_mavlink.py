@@ -34,6 +34,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also send LOCAL_POSITION_NED (as a vehicle with a positioning system does)")
     s.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: run "
                                                                 "until Ctrl-C)")
+    s.add_argument("--firmware", choices=("4.7", "4.1"), default="4.7",
+                   help="which generation of ArduSub parameter names to emulate: 4.7 (MAV_SYSID, MAV_GCS_SYSID; "
+                        "the default) or 4.1 (SYSID_THISMAV, SYSID_MYGCS)")
+    s.add_argument("--home", default="63.44,10.40,0",
+                   help="LAT,LON[,ALT] of the home position and EKF origin [deg, deg, m] (default 63.44,10.40,0), "
+                        "or 'none' for a vehicle without one (MAV_CMD_GET_HOME_POSITION then fails, as on ArduSub)")
     s.set_defaults(func=_cmd_sim)
 
     b = cmds.add_parser("bridge", help="run rovlab's estimator (and controller) on an ArduSub vehicle over MAVLink")
@@ -151,6 +157,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be > 0 s, got {args.duration}")
     _check_connect(args.connect)
+    home = _parse_home(args.home)
     scenario = load_scenario(args.scenario, seed=args.seed)
     vehicle = load_vehicle(args.vehicle) if args.vehicle else None
 
@@ -166,14 +173,16 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise UserError(f"scenario {args.scenario}: {exc}") from None
         _compile_announced(vsim, log)
-        sim = ArduSubSim(vsim, connect=args.connect, local_position=args.local_position, log=log)
+        sim = ArduSubSim(vsim, connect=args.connect, local_position=args.local_position, firmware=args.firmware,
+                         home=home, log=log)
     except MavlinkMissing as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:
         raise UserError(f"cannot open {args.connect}: {exc.strerror or exc}") from None
     _stop_on_signals(sim.stop)
     print(f"rovlab mavlink sim: {sim.vehicle.name} ({scenario.name}, seed {scenario.seed}) as ArduSub system "
-          f"{sim.sysid} on {args.connect} ({len(sim.vehicle.thrusters)} thrusters; Ctrl-C stops)", flush=True)
+          f"{sim.sysid} on {args.connect} ({len(sim.vehicle.thrusters)} thrusters, ArduSub {args.firmware} parameter "
+          "names; Ctrl-C stops)", flush=True)
     try:
         sim.run(duration_s=args.duration)
     finally:
@@ -181,6 +190,24 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         print(f"rovlab mavlink sim: stopped ({sim.counts['received']} messages received, "
               f"{sim.counts['bad_data']} malformed, {sim.counts['refused']} refused)", file=sys.stderr, flush=True)
     return 0
+
+
+def _parse_home(text: str) -> tuple[float, float, float] | None:
+    from rovlab.interfaces.cli import UserError
+
+    if text.strip().lower() == "none":
+        return None
+    parts = text.split(",")
+    try:
+        values = [float(v) for v in parts]
+    except ValueError:
+        values = []
+    if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values) \
+            or not (-90 <= values[0] <= 90 and -180 <= values[1] <= 180):
+        raise UserError(f"--home {text!r}: expected LAT,LON[,ALT] (latitude -90 .. 90, longitude -180 .. 180 deg, "
+                        "altitude m) or none")
+    lat, lon = values[0], values[1]
+    return lat, lon, values[2] if len(values) == 3 else 0.0
 
 
 def _compile_announced(vsim: Any, log: Any) -> None:
