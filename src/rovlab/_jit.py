@@ -58,7 +58,6 @@ KERNEL_MODULES = (
     "core/angles.py", "core/components.py",
     "estimation/ekf.py", "estimation/fusion.py", "estimation/kalman.py", "estimation/kf.py", "estimation/layout.py",
     "estimation/offline.py",
-    "io/csvtext.py",
     "models/kinetics.py", "models/sensors.py", "models/thruster_kernels.py", "models/thrusters.py",
     "sim/actuators.py", "sim/loop.py", "sim/plant.py", "sim/step.py",
 )

@@ -80,8 +80,14 @@ def test_writer_checks_columns_and_writes_to_a_stream():
     write_csv(buf, {"time_s": [0.0, 0.1], "x": [1.5, np.nan]}, float_format="%.3f")
     assert buf.getvalue() == "time_s,x\n0.000,1.500\n0.100,\n"
     buf = io.StringIO()
+    write_csv(buf, {"time_s": [0.1 + 0.2], "n": np.array([3], dtype=np.int8), "s": ["ok"]})
+    assert buf.getvalue() == 'time_s,n,s\n0.30000000000000004,3,ok\n'
+    # a text cell that needs quotes: pyarrow's writer then quotes every text cell, the numbers' too
+    buf = io.StringIO()
     write_csv(buf, {"time_s": [0.1 + 0.2], "n": np.array([3], dtype=np.int8), "s": ["a\"b"]})
-    assert buf.getvalue() == 'time_s,n,s\n0.30000000000000004,3,"a""b"\n'
+    assert buf.getvalue() == 'time_s,n,s\n"0.30000000000000004",3,"a""b"\n'
+    log = parse_log(buf.getvalue(), required=("n",))
+    assert log.time.tolist() == [0.1 + 0.2] and log["n"].tolist() == [3.0] and log.text["s"] == ['a"b']
 
 
 def test_exact_columns_keep_epoch_time_stamps():

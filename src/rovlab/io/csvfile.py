@@ -1,4 +1,4 @@
-"""CSV through pyarrow's CSV reader: what rovlab's log and table readers share.
+"""CSV through pyarrow's CSV reader and writer: what rovlab's log and table readers and writers share.
 
 pyarrow splits the lines into cells, unquotes them and parses numbers; this module does what it
 has no option for, on the bytes and vectorised, so that every message can name a file line:
@@ -293,6 +293,16 @@ def float_array(arr: Any) -> np.ndarray:
     return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
+def floats(x: np.ndarray) -> Any:
+    """A float64 array for pyarrow, NaN as null (empty cells); shares x's memory."""
+    import pyarrow as pa
+
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    nan = np.isnan(x)
+    validity = pa.py_buffer(np.packbits(~nan, bitorder="little")) if nan.any() else None
+    return pa.Array.from_buffers(pa.float64(), x.size, [validity, pa.py_buffer(x)])
+
+
 def ints(x: np.ndarray) -> Any:
     import pyarrow as pa
 
@@ -313,3 +323,46 @@ def strings(items: Sequence[str | None]) -> Any:
     return pa.Array.from_buffers(pa.string() if small else pa.large_string(), len(encoded),
                                  [validity, pa.py_buffer(offsets.astype(np.int32) if small else offsets),
                                   pa.py_buffer(b"".join(encoded))])
+
+
+def labels(codes: np.ndarray, names: Sequence[str]) -> Any:
+    """The label of each integer code, as a pyarrow dictionary array (written as the labels; no
+    string per row is built)."""
+    import pyarrow as pa
+
+    codes = np.ascontiguousarray(codes, dtype=np.int64)
+    if codes.size and (codes.min() < 0 or codes.max() >= len(names)):
+        raise ValueError(f"label codes must be in 0..{len(names) - 1}, got {codes.min()}..{codes.max()}")
+    return pa.DictionaryArray.from_arrays(ints(codes), strings([str(s) for s in names]))
+
+
+def csv_rows(arrays: Sequence[Any], names: Sequence[str], *, quoting: str = "none") -> Any:
+    """Equally long pyarrow arrays as CSV rows (no header), a pyarrow buffer. ``quoting``:
+    'none' (a cell needing quotes is refused) or 'needed' (every text cell quoted)."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    sizes = {len(a) for a in arrays}
+    if len(sizes) > 1:
+        raise ValueError(f"columns of different lengths: {dict(zip(names, (len(a) for a in arrays)))}")
+    table = pa.Table.from_arrays(list(arrays), names=[f"c{i}" for i in range(len(arrays))])
+    pool = pa.system_memory_pool()  # the default pool (mimalloc) kept ~12 MiB more at the peak of rovlab filter on 360 000 rows
+    sink = pa.BufferOutputStream(memory_pool=pool)
+    try:
+        pcsv.write_csv(table, sink, write_options=pcsv.WriteOptions(include_header=False, quoting_style=quoting),
+                       memory_pool=pool)
+    except pa.ArrowInvalid as exc:
+        raise ValueError(f"{exc} (a cell that needs quoting: text columns are plain words)") from None
+    return sink.getvalue()
+
+
+def quote(text: str) -> str:
+    """A header cell as RFC 4180 writes it."""
+    if any(ch in text for ch in ',"\n\r'):
+        return '"' + text.replace('"', '""') + '"'
+    return text
+
+
+def head(names: Sequence[str], comments: Sequence[str] = ()) -> bytes:
+    """Comment lines and the header line."""
+    return ("".join(f"# {line}\n" for line in comments) + ",".join(quote(n) for n in names) + "\n").encode("utf-8")

@@ -1,11 +1,13 @@
-"""Writing CSV logs: a whole table (write_csv: the simulator's timeseries.csv, the HMI's session
-log, a converted dive) or a chunk of rows at a time (ChunkWriter: rovlab filter's estimates).
-What they write, :mod:`rovlab.io.logreader` reads back unchanged.
+"""Writing CSV logs through pyarrow's CSV writer: a whole table (:func:`write_csv`: the
+simulator's timeseries.csv, the HMI's session log, a converted dive) or a chunk of rows at a
+time (:class:`ChunkWriter`: the estimates of ``rovlab filter``). Both write NaN as an empty cell
+("no value"), so what they write :func:`rovlab.io.logreader.read_log` reads back unchanged, and
+both write atomically (a temporary file renamed over the target), so a crash or a refused run
+never leaves half a log.
 """
 
 from __future__ import annotations
 
-import io
 import os
 import sys
 from collections.abc import Iterable, Mapping, Sequence
@@ -14,21 +16,90 @@ from typing import IO, Any
 
 import numpy as np
 
-from rovlab.io.csvtext import round_significant  # noqa: F401 (part of this module's API)
+from rovlab.io.csvfile import csv_rows, floats, head, ints, labels, strings
+
+
+def round_significant(values: np.ndarray, digits: int) -> np.ndarray:
+    """``values`` rounded to ``digits`` significant digits (vectorised ``float('%.{digits}g' % x)``).
+
+    x * 10^k is rounded to an integer m and divided by the exact power of ten, which gives the
+    double nearest to m 10^-k: its shortest round-trip form has at most ``digits`` digits. Values
+    beyond 1e+-22 from the scale that powers of ten stay exact, inf and NaN are returned as they are.
+    """
+    a = np.asarray(values, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        k = (digits - 1) - np.floor(np.log10(np.abs(a)))
+        ok = np.isfinite(k) & (np.abs(k) <= 22)
+        k = np.where(ok, k, 0.0)
+        scale = 10.0 ** np.abs(k)
+        up = k >= 0
+        r = np.where(up, np.round(a * scale) / scale, np.round(a / scale) * scale)
+    return np.where(ok, r, a)
+
+
+def write_csv(target: str | Path | IO[str], columns: Mapping[str, Sequence | np.ndarray], *,
+              float_format: str | None = None, comments: Iterable[str] = (),
+              exact: Iterable[str] = ()) -> None:
+    """Write equally long columns (numbers or strings) as CSV; ``-`` means standard output.
+
+    Numbers are written exactly, as Python's ``repr`` writes them (``0.1``, ``1550.0``,
+    ``1e-05``), unless ``float_format`` (e.g. ``"%.6g"``) is given; the ``exact`` columns (e.g.
+    ``("time_s",)``) are always written exactly, so that ``%.10g`` does not turn epoch time stamps
+    (1.7e9 s) into whole seconds. Integers are written as integers, text as it is; when a text
+    cell needs quotes (a comma, a quote, a line break), every text cell is quoted (RFC 4180).
+    """
+    names = list(columns)
+    if not names:
+        raise ValueError("no columns to write")
+    arrays = []
+    length = None
+    exact = set(exact)
+    quoted = False
+    for name in names:
+        arr = np.asarray(columns[name])
+        if arr.ndim != 1:
+            raise ValueError(f"column {name!r} must be one-dimensional, got shape {arr.shape}")
+        if length is None:
+            length = arr.size
+        elif arr.size != length:
+            raise ValueError(f"column {name!r} has {arr.size} values, the others {length}")
+        if arr.dtype.kind == "f":
+            fmt = repr if float_format is None or name in exact else (lambda v: float_format % v)
+            arrays.append(strings([None if v != v else fmt(v) for v in arr.astype(float).tolist()]))
+        elif arr.dtype.kind == "i" or arr.dtype.kind == "u" and arr.dtype.itemsize < 8:
+            arrays.append(ints(arr))
+        else:
+            texts = [str(v) for v in arr.tolist()]
+            arrays.append(strings(texts))
+            quoted = quoted or any(ch in text for text in set(texts) for ch in ',"\r\n')
+    data = head(names, list(comments)) + csv_rows(arrays, names, quoting="needed" if quoted else "none").to_pybytes()
+    if hasattr(target, "write"):
+        target.write(data.decode("utf-8"))
+        return
+    if str(target) == "-":
+        sys.stdout.write(data.decode("utf-8"))
+        return
+    path = Path(target)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
 
 
 class ChunkWriter:
-    """A CSV file written a chunk of rows at a time: floats in shortest round-trip form (or rounded
-    to ``significant`` digits, except the ``exact`` columns), NaN as an empty cell, text columns as
-    given (no quoting: labels such as 'lost-timeout' only).
+    """A CSV file written a chunk of rows at a time by pyarrow's CSV writer: floats in their
+    shortest round-trip form as pyarrow lays them out (``0.000001``, ``9.99e-7``, ``1e+10``,
+    ``100``), rounded to ``significant`` digits except the ``exact`` columns; NaN as an empty
+    cell; text columns as given (not quoted: labels such as 'lost-timeout' only).
 
     Atomic like :func:`write_csv`: rows go to a temporary file renamed over ``target`` by
     :meth:`close`; :meth:`abort` (or an exception inside ``with``) removes it, so a refused or
     interrupted run leaves no half-written output. ``-`` writes to standard output. Chunks are
-    rounded and formatted by the compiled loop of :mod:`rovlab.io.csvtext` and written, in order,
-    by a worker thread (both release the GIL, so this overlaps the caller's next chunk), at most
-    two chunks in flight. The numbers are laid out as pyarrow's CSV writer lays them out
-    (``0.000001``, ``9.99e-7``, ``1e+10``), with or without pyarrow installed.
+    rounded, formatted and written, in order, by a worker thread (pyarrow formats without the
+    GIL, so this overlaps the caller's next chunk), at most two chunks in flight.
     """
 
     _IN_FLIGHT = 2
@@ -38,6 +109,8 @@ class ChunkWriter:
         from concurrent.futures import ThreadPoolExecutor
 
         self.names = list(names)
+        if not self.names:
+            raise ValueError("no columns to write")
         self.target = str(target)
         self.significant = significant
         self.exact = set(exact)
@@ -49,30 +122,22 @@ class ChunkWriter:
             path = Path(target)
             self._tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
             self._f = open(self._tmp, "wb")
-        head = "".join(f"# {line}\n" for line in comments) + ",".join(_quote(n) for n in self.names) + "\n"
-        self._f.write(head.encode("utf-8"))
+        self._f.write(head(self.names, list(comments)))
         self._pool: Any = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rovlab-csv")
 
-    def _format(self, columns: Mapping[str, Any]) -> bytes | memoryview:
-        """One chunk as CSV bytes, on the worker thread."""
-        from rovlab.io.csvtext import csv_rows
-
-        cols: list[Any] = []
-        digits: list[int | None] = []
+    def _format(self, columns: Mapping[str, Any]) -> Any:
+        """One chunk as CSV rows (a pyarrow buffer), on the worker thread."""
+        arrays: list[Any] = []
         for name in self.names:
             col = columns[name]
-            digits.append(None)
             if isinstance(col, tuple):
-                cols.append(col)
+                arrays.append(labels(*col))
             elif isinstance(col, np.ndarray) and col.dtype.kind == "f":
-                cols.append(col)  # rounded by the kernel, exactly as round_significant rounds
-                digits[-1] = None if name in self.exact else self.significant
-            else:  # text (or integers, written exactly): as codes into its distinct values
-                texts = [str(v) for v in (col.tolist() if hasattr(col, "tolist") else col)]
-                labels = sorted(set(texts))
-                code = {text: i for i, text in enumerate(labels)}
-                cols.append((np.array([code[text] for text in texts], dtype=np.int64), labels))
-        return csv_rows(cols, digits)
+                digits = None if name in self.exact else self.significant
+                arrays.append(floats(col if digits is None else round_significant(col, digits)))
+            else:  # text (or integers, written exactly)
+                arrays.append(strings([str(v) for v in (col.tolist() if hasattr(col, "tolist") else col)]))
+        return csv_rows(arrays, self.names)
 
     def write(self, columns: Mapping[str, np.ndarray | Sequence[str] | tuple[np.ndarray, Sequence[str]]]) -> None:
         """Append rows: each column a float array, a sequence of strings, or (codes, labels): the
@@ -86,7 +151,7 @@ class ChunkWriter:
 
     def _write(self, columns: Mapping[str, Any]) -> None:
         """Format and write one chunk, on the worker thread (one worker: in order)."""
-        self._f.write(self._format(columns))
+        self._f.write(memoryview(self._format(columns)))
 
     def _drain(self, keep: bool) -> None:
         pending, self._pending = self._pending, []
@@ -102,7 +167,11 @@ class ChunkWriter:
                 self._pool = None
 
     def close(self) -> None:
-        self._drain(keep=True)
+        try:
+            self._drain(keep=True)
+        except BaseException:
+            self.abort()  # a chunk could not be written: no output
+            raise
         if self._tmp is None:
             self._f.flush()
             return
@@ -126,67 +195,3 @@ class ChunkWriter:
             self.close()
         else:
             self.abort()
-
-
-def write_csv(target: str | Path | IO[str], columns: Mapping[str, Sequence | np.ndarray], *,
-              float_format: str | None = None, comments: Iterable[str] = (),
-              exact: Iterable[str] = ()) -> None:
-    """Write equally long columns (numbers or strings) as CSV; ``-`` means standard output.
-
-    Numbers are written exactly (shortest round-trip form) unless ``float_format`` (e.g.
-    ``"%.6g"``) is given; the ``exact`` columns (e.g. ``("time_s",)``) are always written exactly, so
-    that ``%.10g`` does not turn epoch time stamps (1.7e9 s) into whole seconds. NaN is written as an
-    empty cell ("no value"), so what this writes
-    :func:`read_log` reads back unchanged. A file is written atomically (temporary file, then
-    rename) so a crash never leaves half a log.
-    """
-    names = list(columns)
-    if not names:
-        raise ValueError("no columns to write")
-    cols = []
-    length = None
-    exact = set(exact)
-    for name in names:
-        col = columns[name]
-        arr = np.asarray(col)
-        if arr.ndim != 1:
-            raise ValueError(f"column {name!r} must be one-dimensional, got shape {arr.shape}")
-        if length is None:
-            length = arr.size
-        elif arr.size != length:
-            raise ValueError(f"column {name!r} has {arr.size} values, the others {length}")
-        if arr.dtype.kind in "iub":
-            cols.append([str(v) for v in arr.tolist()])
-        elif arr.dtype.kind == "f":
-            fmt = repr if float_format is None or name in exact else (lambda v: float_format % v)
-            cols.append(["" if v != v else fmt(v) for v in arr.astype(float).tolist()])
-        else:
-            cols.append([_quote(str(v)) for v in arr.tolist()])
-    buf = io.StringIO()
-    for line in comments:
-        buf.write(f"# {line}\n")
-    buf.write(",".join(_quote(n) for n in names) + "\n")
-    for row in zip(*cols):
-        buf.write(",".join(row))
-        buf.write("\n")
-    text = buf.getvalue()
-    if hasattr(target, "write"):
-        target.write(text)
-        return
-    if str(target) == "-":
-        sys.stdout.write(text)
-        return
-    path = Path(target)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
-def _quote(text: str) -> str:
-    if any(ch in text for ch in ',"\n\r'):
-        return '"' + text.replace('"', '""') + '"'
-    return text

@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from rovlab.core.files import atomic_write_text
-from rovlab.io.csvfile import DATA, bools, comments, float_array, header_cells, read_rows, split_lines
+from rovlab.core.files import atomic_write_bytes, atomic_write_text
+from rovlab.io.csvfile import DATA, bools, comments, csv_rows, float_array, head, header_cells, read_rows, split_lines, strings
 from rovlab.params.validate import ConfigError, Problem
 
 _MAX_PROBLEMS = 20  # stop collecting after this many bad cells (the rest are likely the same)
@@ -282,11 +282,11 @@ def write_table(path: str | Path, columns: Mapping[str, Iterable[float]], *,
     sizes = {a.shape[0] for a in arrays}
     if len(sizes) > 1:
         raise ValueError(f"columns differ in length: {dict(zip(names, (a.shape[0] for a in arrays)))}")
-    fmts = [(formats or {}).get(name, ".9g") for name in names]
-    lines = [",".join(names)]
-    for row in zip(*arrays):
-        lines.append(",".join(format(int(x) if f == "d" else float(x), f) for x, f in zip(row, fmts)))
-    atomic_write_text(path, "\n".join(lines) + "\n")
+    cells = []
+    for name, arr in zip(names, arrays):
+        spec = (formats or {}).get(name, ".9g")
+        cells.append(strings([format(int(x) if spec == "d" else float(x), spec) for x in arr.tolist()]))
+    atomic_write_bytes(path, head(names) + csv_rows(cells, names).to_pybytes())
     if comments:
         write_sidecar(path, {"comments": list(comments)})
     return path
