@@ -237,7 +237,8 @@ class DepthHeadingFilter:
         self.H = np.ascontiguousarray(model.H)
         self.cfg = model.channel_config()
         self.wrap = model.wrap_states()
-        self.packed = pack_model(model.Phi, model.Delta, model.Q, self.H, self.cfg, self.wrap)
+        self.packed = pack_model(model.Phi, model.Delta, model.Q, self.H, self.cfg, self.wrap,
+                                 getattr(model, "input_uncertainty", None))
         self._out_size = _out_size(self.n, self.m)
 
     @classmethod

@@ -19,6 +19,11 @@ Checks that do not involve the filter (a sensor fault whatever the filter believ
   ``CFG_STUCK_BOUND`` (N - 1 dof, false-alarm probability 1e-9) is not noise of variance R_j:
   the sensor repeats a frozen value -> LOST (reason STUCK) until a block scatters again. Motion
   of the vehicle only adds scatter, so the check cannot be fooled by the filter or the model.
+  With ``CFG_STUCK_BOUND`` = 0 the block is stuck only when every sample in it is the same number
+  (the *repetition* check): for a channel whose source is an autopilot's estimate (ArduSub's AHRS
+  heading is smooth, so a still vehicle's scatter is far below the white-noise bound R_j: on the
+  real log ../shared/data/ardusub/small.tlog the scatter check called 35 % of the rows stuck) or
+  a sensor quantised coarser than its noise, where a frozen value is an exact repetition;
 
 Checks against the prediction:
 
@@ -312,6 +317,8 @@ def _stuck_check(ch, cfg, j, v):
         ch[j, CH_BLK_N] = cnt
         return -1
     ch[j, CH_BLK_N] = 0.0
+    if cfg[j, CFG_STUCK_BOUND] == 0.0:  # repetition check: every sample of the block the same number
+        return 1 if ch[j, CH_BLK_S2] == 0.0 else 0
     s1 = ch[j, CH_BLK_S1]
     scatter = ch[j, CH_BLK_S2] - s1 * s1 / nb  # sum of squared deviations from the block mean
     return 1 if scatter < cfg[j, CFG_STUCK_BOUND] * cfg[j, CFG_R] else 0

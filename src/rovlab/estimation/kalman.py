@@ -27,9 +27,9 @@ kernels work *in place* on x, P, ch (copy first if the input must be kept) and n
 ``model``
     the constant filter description, one flat float64 array built once by
     ``pack_model(Phi, Delta, Q, H, cfg, wrap)`` (``DepthHeadingFilter.packed``):
-    ``[n, p, m, len(sp), Phi (n*n), Delta (n*p), Q (n*n), H (m*n), cfg (m*N_CFG), wrap (n), sp]``
-    with sp = Phi in CSR form. ``unpack_model(model)`` returns the views
-    ``(Phi, Delta, Q, H, cfg, wrap, sp)``. cfg layout: rovlab.estimation.fusion.
+    ``[n, p, m, len(sp), Phi (n*n), Delta (n*p), Q (n*n), H (m*n), cfg (m*N_CFG), wrap (n), sp, kappa (p)]``
+    with sp = Phi in CSR form and kappa each input's relative uncertainty. ``unpack_model(model)``
+    returns the views ``(Phi, Delta, Q, H, cfg, wrap, sp, kappa)``. cfg layout: rovlab.estimation.fusion.
 ``work``
     scratch, ``kf_workspace(n, m)`` (``work_size(n, m)`` floats); allocate once, reuse.
 ``kf_predict(model, x, P, u, work) -> flags``
@@ -100,8 +100,9 @@ _setattr = object.__setattr__
 # --------------------------------------------------------------------------------------------
 
 def pack_model(Phi: np.ndarray, Delta: np.ndarray, Q: np.ndarray, H: np.ndarray, cfg: np.ndarray,
-               wrap: np.ndarray) -> np.ndarray:
-    """The flat float64 model array every kernel takes (layout in the module docstring)."""
+               wrap: np.ndarray, kappa: np.ndarray | None = None) -> np.ndarray:
+    """The flat float64 model array every kernel takes (layout in the module docstring); ``kappa``
+    (p): each input's relative uncertainty (default 0: the inputs are known exactly)."""
     Phi = np.asarray(Phi, dtype=float)
     n = Phi.shape[0]
     Delta = np.asarray(Delta, dtype=float).reshape(n, -1)
@@ -111,10 +112,13 @@ def pack_model(Phi: np.ndarray, Delta: np.ndarray, Q: np.ndarray, H: np.ndarray,
     wrap = np.asarray(wrap, dtype=float).ravel()
     if Phi.shape != (n, n) or wrap.shape != (n,):
         raise ValueError(f"Phi must be square and wrap have {n} entries")
+    kappa = np.zeros(Delta.shape[1]) if kappa is None else np.asarray(kappa, dtype=float).ravel()
+    if kappa.shape != (Delta.shape[1],) or not np.all(np.isfinite(kappa)) or np.any(kappa < 0):
+        raise ValueError(f"kappa must hold {Delta.shape[1]} finite non-negative numbers, got {kappa!r}")
     sp = _phi_csr(Phi)
     model = np.concatenate([
         [n, Delta.shape[1], H.shape[0], sp.size], Phi.ravel(), Delta.ravel(), Q.ravel(), H.ravel(),
-        cfg.ravel(), wrap, sp,
+        cfg.ravel(), wrap, sp, kappa,
     ])
     model.setflags(write=False)
     return model
@@ -139,7 +143,7 @@ def _view2(a, o, rows, cols):
 
 @njit(cache=True, inline="always")
 def unpack_model(model):
-    """Views (Phi, Delta, Q, H, cfg, wrap, structure) of a packed model."""
+    """Views (Phi, Delta, Q, H, cfg, wrap, structure, kappa) of a packed model."""
     n = int(model[0])
     p = int(model[1])
     m = int(model[2])
@@ -158,7 +162,9 @@ def unpack_model(model):
     wrap = model[o:o + n]
     o += n
     sp = model[o:o + ls]
-    return Phi, Delta, Q, H, cfg, wrap, sp
+    o += ls
+    kappa = model[o:o + p]
+    return Phi, Delta, Q, H, cfg, wrap, sp, kappa
 
 
 @njit(cache=True)
@@ -172,8 +178,13 @@ def kf_workspace(n: int, m: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def predict_arrays(x, P, Delta, Q, wrap, sp, u, work):
-    """kf_predict on unpacked model arrays (for loops that unpack once)."""
+def predict_arrays(x, P, Delta, Q, wrap, sp, u, work, kappa):
+    """kf_predict on unpacked model arrays (for loops that unpack once).
+
+    An input known only to a relative accuracy kappa_l (e.g. the wrench a real vehicle's thrusters
+    give for their PWM: the thrust curve at the battery's voltage, ventilation at the surface, none
+    out of the water) adds the covariance of its error, sigma_l = kappa_l |u_l| held over the sample:
+    P += (kappa_l u_l)^2 Delta_l Delta_l^T. kappa = 0 adds nothing (the thesis's filter)."""
     n = x.shape[0]
     p = u.shape[0]
     nn = n * n
@@ -220,6 +231,18 @@ def predict_arrays(x, P, Delta, Q, wrap, sp, u, work):
                 acc += work[r0 + int(sp[ocol + e])] * sp[oval + e]
             P[i, j] = acc
             P[j, i] = acc
+    for l in range(p):
+        g = kappa[l] * work[ou + l]
+        if g != 0.0:
+            g2 = g * g
+            for i in range(n):
+                di = g2 * Delta[i, l]
+                if di != 0.0:
+                    for j in range(i + 1):
+                        c = di * Delta[j, l]
+                        P[i, j] += c
+                        if j != i:
+                            P[j, i] += c
     return flags
 
 
@@ -314,7 +337,7 @@ def correct_arrays(x, P, ch, H, cfg, wrap, t, y, present, rep, work):
 
 
 @njit(cache=True)
-def step_arrays(Delta, Q, H, cfg, wrap, sp, x, P, ch, t, u, y, present, xc, Pc, rep, work):
+def step_arrays(Delta, Q, H, cfg, wrap, sp, kappa, x, P, ch, t, u, y, present, xc, Pc, rep, work):
     """kf_step on unpacked model arrays (for loops that unpack once)."""
     correct_arrays(x, P, ch, H, cfg, wrap, t, y, present, rep, work)
     n = x.shape[0]
@@ -322,7 +345,7 @@ def step_arrays(Delta, Q, H, cfg, wrap, sp, x, P, ch, t, u, y, present, xc, Pc, 
         xc[i] = x[i]
         for j in range(n):
             Pc[i, j] = P[i, j]
-    flags = predict_arrays(x, P, Delta, Q, wrap, sp, u, work)
+    flags = predict_arrays(x, P, Delta, Q, wrap, sp, u, work, kappa)
     if not math.isfinite(t):
         flags |= FLAG_TIME
     return flags
@@ -330,25 +353,25 @@ def step_arrays(Delta, Q, H, cfg, wrap, sp, x, P, ch, t, u, y, present, xc, Pc, 
 
 @njit(cache=True)
 def kf_predict(model, x, P, u, work):
-    Phi, Delta, Q, H, cfg, wrap, sp = unpack_model(model)
-    return predict_arrays(x, P, Delta, Q, wrap, sp, u, work)
+    Phi, Delta, Q, H, cfg, wrap, sp, kappa = unpack_model(model)
+    return predict_arrays(x, P, Delta, Q, wrap, sp, u, work, kappa)
 
 
 @njit(cache=True)
 def kf_correct(model, x, P, ch, t, y, present, rep, work):
-    Phi, Delta, Q, H, cfg, wrap, sp = unpack_model(model)
+    Phi, Delta, Q, H, cfg, wrap, sp, kappa = unpack_model(model)
     return correct_arrays(x, P, ch, H, cfg, wrap, t, y, present, rep, work)
 
 
 @njit(cache=True)
 def kf_step(model, x, P, ch, t, u, y, present, xc, Pc, rep, work):
-    Phi, Delta, Q, H, cfg, wrap, sp = unpack_model(model)
-    return step_arrays(Delta, Q, H, cfg, wrap, sp, x, P, ch, t, u, y, present, xc, Pc, rep, work)
+    Phi, Delta, Q, H, cfg, wrap, sp, kappa = unpack_model(model)
+    return step_arrays(Delta, Q, H, cfg, wrap, sp, kappa, x, P, ch, t, u, y, present, xc, Pc, rep, work)
 
 
 @njit(cache=True, nogil=True)  # only arrays: a log's reader and writer threads run alongside
 def kf_run(model, x, P, ch, t, u, y, present, n_predict, X, V, status, reason, event, innov, S, flags):
-    Phi, Delta, Q, H, cfg, wrap, sp = unpack_model(model)
+    Phi, Delta, Q, H, cfg, wrap, sp, kappa = unpack_model(model)
     N = t.shape[0]
     n = x.shape[0]
     m = H.shape[0]
@@ -367,7 +390,7 @@ def kf_run(model, x, P, ch, t, u, y, present, n_predict, X, V, status, reason, e
             S[k, j] = rep[j, REP_S]
         f = 0
         for _ in range(n_predict[k]):
-            f |= predict_arrays(x, P, Delta, Q, wrap, sp, u[k], work)
+            f |= predict_arrays(x, P, Delta, Q, wrap, sp, u[k], work, kappa)
         if not math.isfinite(t[k]):
             f |= FLAG_TIME
         flags[k] = np.int8(f)
@@ -382,7 +405,7 @@ def _out_size(n: int, m: int) -> int:
 
 @njit(cache=True)
 def _online_into(model, state, t, u, y, present, use_present, out):
-    Phi, Delta, Q, H, cfg, wrap, sp = unpack_model(model)
+    Phi, Delta, Q, H, cfg, wrap, sp, kappa = unpack_model(model)
     n = int(model[0])
     p = int(model[1])
     m = int(model[2])
@@ -409,7 +432,7 @@ def _online_into(model, state, t, u, y, present, use_present, out):
     rep = _view2(out, ls + n + n * n, m, N_REP)
     pres = out[op:op + m]
     work = out[op + m:]
-    out[ls + lr - 1] = step_arrays(Delta, Q, H, cfg, wrap, sp, x, P, ch, t, u, y, pres, xc, Pc, rep, work)
+    out[ls + lr - 1] = step_arrays(Delta, Q, H, cfg, wrap, sp, kappa, x, P, ch, t, u, y, pres, xc, Pc, rep, work)
 
 
 @njit(cache=True)

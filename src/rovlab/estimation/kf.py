@@ -42,6 +42,7 @@ class KalmanFilter(NamedTuple):
     ch: np.ndarray  # sensor-management state (m x N_CH)
     u: np.ndarray  # (p) work
     work: np.ndarray  # kernel scratch
+    kappa: np.ndarray  # (p) relative uncertainty of each input (the thrusters' wrench)
 
 
 @njit(cache=True)
@@ -53,7 +54,7 @@ def _correct(est, t, y, present, rep):
 def _predict(est, t, tau):
     for i in range(est.inputs.shape[0]):
         est.u[i] = tau[est.inputs[i]]
-    predict_arrays(est.x, est.P, est.Delta, est.Q, est.wrap, est.sp, est.u, est.work)
+    predict_arrays(est.x, est.P, est.Delta, est.Q, est.wrap, est.sp, est.u, est.work, est.kappa)
 
 
 register_estimator(KalmanFilter, state=("x", "P", "ch"), correct=_correct, predict=_predict)
@@ -61,13 +62,14 @@ register_estimator(KalmanFilter, state=("x", "P", "ch"), correct=_correct, predi
 
 def from_model(fm: FilterModel) -> KalmanFilter:
     """The component of a designed filter model, at its initial belief."""
-    packed = pack_model(fm.Phi, fm.Delta, fm.Q, fm.H, fm.channel_config(), fm.wrap_states())
+    packed = pack_model(fm.Phi, fm.Delta, fm.Q, fm.H, fm.channel_config(), fm.wrap_states(), fm.input_uncertainty)
     # plain functions: set-up code run once, which need not compile anything
-    Phi, Delta, Q, H, cfg, wrap, sp = (np.array(a, dtype=float, order="C") for a in plain(unpack_model)(packed))
+    Phi, Delta, Q, H, cfg, wrap, sp, kappa = (np.array(a, dtype=float, order="C")
+                                              for a in plain(unpack_model)(packed))
     n, m = fm.Phi.shape[0], len(fm.channels)
     return KalmanFilter(Phi, Delta, Q, H, cfg, wrap, sp, np.array(_INPUTS, dtype=np.int64),
                         fm.x0.astype(float).copy(), fm.P0.astype(float).copy(), plain(new_channel_state)(m),
-                        np.zeros(len(_INPUTS)), np.empty(plain(work_size)(n, m)))
+                        np.zeros(len(_INPUTS)), np.empty(plain(work_size)(n, m)), kappa)
 
 
 def build(vehicle: Vehicle, config: DesignConfig, *, require_observable: bool = True) -> EstimatorSpec:

@@ -12,7 +12,8 @@ cannot estimate.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -94,6 +95,7 @@ class FilterModel:
     unobservable_directions: np.ndarray  # 6 x k basis (unit on a pivot state each)
     states: tuple[str, ...] = STATES
     inputs: tuple[str, ...] = INPUTS
+    input_uncertainty: np.ndarray = field(default_factory=lambda: np.zeros(len(INPUTS)))  # kappa per input
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -311,7 +313,7 @@ def build_filter_model(vehicle: Vehicle, config: DesignConfig, *, require_observ
         h=config.sample_time, params=params, T_w=T_w, T_r=T_r, A=A, B=B, E=E, W=W, Phi=disc.Phi,
         Delta=disc.Delta, Gamma=disc.Gamma, Q=disc.Q, channels=tuple(channels), H=H, R=R,
         x0=np.array(config.initial_state), P0=config.P0, observable=observable, unobservable=touched,
-        unobservable_directions=V,
+        unobservable_directions=V, input_uncertainty=np.full(len(INPUTS), float(config.thrust_uncertainty)),
     )
 
 
@@ -322,7 +324,6 @@ def make_channels(vehicle: Vehicle, config: DesignConfig, state_of: dict[str, in
     measurable quantity is ``state_of`` (every problem collected, none raised). Shared by the
     depth-and-heading filter and the 4-DOF EKF: the same sensor-management settings, lever arms
     and variances."""
-    from rovlab.estimation.layout import STUCK_FALSE_ALARM
 
     file = config.file or config.name
     channels: list[Channel] = []
@@ -370,10 +371,24 @@ def make_channels(vehicle: Vehicle, config: DesignConfig, state_of: dict[str, in
             gate_threshold=_chi2_ppf(f.gate_probability, 1) if f.gate_probability < 1.0 else np.inf,
             lose_after=f.gate_failures_to_lose, recovery_time_s=f.recovery_time_s, recovery_samples=n_ramp,
             reacquire_after_s=f.reacquire_after_s, startup_s=math.nan if f.startup_s is None else f.startup_s,
-            stuck_samples=n_stuck, stuck_bound=_chi2_ppf(STUCK_FALSE_ALARM, n_stuck - 1) if n_stuck else 0.0,
+            stuck_samples=n_stuck, stuck_bound=_stuck_bound(sensor, mc.quantity, float(variance), n_stuck),
             maneuver_acceleration=f.maneuver_acceleration,
         ))
     return channels, problems
+
+def _stuck_bound(sensor: Any, quantity: str, variance: float, n: int) -> float:
+    """The stuck check's bound (rovlab.estimation.fusion): the chi-square scatter bound of a raw
+    sensor's white noise, or 0 (the repetition check) for an autopilot's estimate and for a sensor
+    quantised coarser than its noise (step q: q^2/12 > R/4, where a still vehicle repeats values)."""
+    if not n:
+        return 0.0
+    q = float(getattr(sensor, "resolution", {}).get(quantity, 0.0))
+    if getattr(sensor, "reports", "measurement") == "estimate" or q * q / 12.0 > variance / 4.0:
+        return 0.0
+    from rovlab.estimation.layout import STUCK_FALSE_ALARM
+
+    return _chi2_ppf(STUCK_FALSE_ALARM, n - 1)
+
 
 def unobservable_problem(file: str, channels, touched: tuple[str, ...], V: np.ndarray,
                          states: tuple[str, ...] = STATES) -> Problem:

@@ -43,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     fil.add_argument("--max-gap-steps", type=int, default=10_000, metavar="N",
                      help="a gap of more than N filter samples restarts the filter from its prior instead of "
                           "predicting through it (default 10000)")
+    fil.add_argument("--trust-vehicle-file", action="store_true",
+                     help="an ArduSub log's parameters (frame, MOT_n_DIRECTION, PWM range) that disagree with the "
+                          "vehicle file: warn instead of refusing")
     _common(fil)
     fil.set_defaults(func=_cmd_filter)
 
@@ -130,7 +133,8 @@ def _cmd_filter(args: argparse.Namespace) -> int:
         raise UserError(f"--max-gap-steps must be at least 1, got {args.max_gap_steps}")
     filt, inputs, vehicle, config = _offline_filter(args)
     with tempfile.TemporaryDirectory(prefix="rovlab-filter-") as tmp:
-        return _filter(args, vehicle, config, filt, inputs, _as_csv(args.log, vehicle, filt.model, Path(tmp)))
+        return _filter(args, vehicle, config, filt, inputs, _as_csv(args.log, vehicle, filt.model, Path(tmp),
+                                                                          trust=args.trust_vehicle_file))
 
 
 def _offline_filter(args: argparse.Namespace):
@@ -160,15 +164,15 @@ def _offline_filter(args: argparse.Namespace):
     return ComponentFilter(info.build(vehicle, config)), WRENCH_COLUMNS, vehicle, config
 
 
-def _as_csv(log: str, vehicle, model, folder: Path) -> str:
+def _as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = False) -> str:
     """The log as a CSV the filter reads: a CSV as it is; a MAVLink dive (.tlog, or an .mcap with
     /mavlink/ topics) converted from its telemetry; another .mcap (rovlab's topics: a simulation
     or a vehicle node's recording) from its measurement and command columns."""
     from rovlab.interfaces.cli import UserError
 
     suffix = Path(log).suffix.lower()
-    if suffix == ".tlog":
-        return _mavlink_as_csv(log, vehicle, model, folder)
+    if suffix in (".tlog", ".bin"):
+        return _mavlink_as_csv(log, vehicle, model, folder, trust=trust)
     if suffix != ".mcap":
         return log
     try:
@@ -180,7 +184,7 @@ def _as_csv(log: str, vehicle, model, folder: Path) -> str:
     except OSError as exc:
         raise UserError(f"cannot read {log}: {exc.strerror or exc}") from None
     if any(t.startswith("/mavlink/") for t in topics):
-        return _mavlink_as_csv(log, vehicle, model, folder)
+        return _mavlink_as_csv(log, vehicle, model, folder, trust=trust)
     from rovlab.io.logwriter import write_csv
 
     out = folder / (Path(log).stem + ".csv")
@@ -188,15 +192,31 @@ def _as_csv(log: str, vehicle, model, folder: Path) -> str:
     return str(out)
 
 
-def _mavlink_as_csv(log: str, vehicle, model, folder: Path) -> str:
-    """A MAVLink dive (.tlog, or .mcap recorded by rovlab mavlink) as the CSV the filter reads."""
+def _mavlink_as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = False) -> str:
+    """A MAVLink dive (.tlog, DataFlash .BIN, or .mcap recorded by rovlab mavlink) as the CSV the
+    filter reads, after checking the vehicle file against the autopilot parameters the log carries
+    (frame, MOT_n_DIRECTION, PWM range: rovlab.interfaces.mavlink.autopilot) unless ``trust``."""
     from rovlab.interfaces.cli import UserError
     from rovlab.interfaces.mavlink import MavlinkMissing
-    from rovlab.interfaces.mavlink.logs import LogError, write_filter_log
+    from rovlab.interfaces.mavlink.autopilot import TRUST_HINT, check_vehicle
+    from rovlab.interfaces.mavlink.logs import LogError, log_parameters, read_records, write_filter_log
 
     out = folder / (Path(log).stem + ".csv")
     try:
-        summary = write_filter_log(log, vehicle, model, out)
+        records = read_records(log)
+        params = log_parameters(records)
+        problems = check_vehicle(vehicle, params, source=str(log))
+        if problems and not trust:
+            raise ConfigError(problems, f"vehicle file {vehicle.name} against the autopilot parameters of the log "
+                                        f"(rovlab vehicle from-ardusub {log} --base {vehicle.name} --out V.toml writes one "
+                                        f"that agrees; {TRUST_HINT})")
+        if problems:
+            print(f"rovlab filter: --trust-vehicle-file: {len(problems)} disagreement(s) with {log}'s parameters "
+                  "ignored", file=sys.stderr)
+        if not params:
+            print(f"rovlab filter: {log} carries no autopilot parameters: the vehicle file's thruster directions "
+                  "cannot be checked", file=sys.stderr)
+        summary = write_filter_log(log, vehicle, model, out, records=records)
     except (LogError, MavlinkMissing, RuntimeError) as exc:
         raise UserError(str(exc)) from None
     counts = ", ".join(f"{k} {v}" for k, v in summary["samples"].items())
@@ -233,6 +253,7 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
         EVENT_REJECTED,
         EVENT_USED,
         REASON_NAMES,
+        REASON_STUCK,
         STATUS_LOST,
         STATUS_NAMES,
         status_label,
@@ -258,6 +279,7 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
     samples = np.zeros(m, dtype=np.int64)
     used = np.zeros(m, dtype=np.int64)
     rejected = np.zeros(m, dtype=np.int64)
+    stuck = np.zeros(m, dtype=np.int64)
     faulty = np.zeros(m, dtype=np.int64)
     lost = np.zeros(m, dtype=np.int64)
     gaps = 0
@@ -274,7 +296,10 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
         for j, c in enumerate(columns):
             out[f"status_{c}"] = (run.status[:, j].astype(np.int32) * 8 + run.reason[:, j], labels)
             used[j] += int(np.count_nonzero(run.event[:, j] == EVENT_USED))
-            rejected[j] += int(np.count_nonzero(run.event[:, j] == EVENT_REJECTED))
+            rej = run.event[:, j] == EVENT_REJECTED
+            frozen = rej & (run.reason[:, j] == REASON_STUCK)  # the status word says lost-stuck there
+            stuck[j] += int(np.count_nonzero(frozen))
+            rejected[j] += int(np.count_nonzero(rej & ~frozen))
             faulty[j] += int(np.count_nonzero(run.event[:, j] == EVENT_NONFINITE))
             lost[j] += int(np.count_nonzero(run.status[:, j] >= STATUS_LOST))
         writer.write(out)
@@ -337,6 +362,7 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
         print(f"  {runner.absurd} value(s) beyond +-1e6 treated as faulty samples (inputs held)", file=report)
     for j, c in enumerate(model.channels):
         print(f"  {c.name:16s} {samples[j]} samples, {used[j]} used, {rejected[j]} rejected by the gate"
+              + (f", {stuck[j]} not used while stuck (lost-stuck)" if stuck[j] else "")
               + (f", {faulty[j]} not finite" if faulty[j] else "")
               + f"; lost {100.0 * lost[j] / max(n_rows, 1):.1f}% of the time", file=report)
     return 0

@@ -29,6 +29,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     check.set_defaults(func=_cmd_check)
     lst = vsub.add_parser("list", help="list the packaged vehicles")
     lst.set_defaults(func=_cmd_list)
+    fa = vsub.add_parser("from-ardusub", help="a vehicle file whose thrusters are as an ArduSub autopilot describes "
+                                              "them (frame, MOT_n_DIRECTION, PWM range), on a base vehicle's "
+                                              "geometry and hydrodynamics")
+    fa.add_argument("log", nargs="?", help="a .tlog or DataFlash .BIN log carrying the autopilot's parameters")
+    fa.add_argument("--connect", default=None, metavar="URL",
+                    help="read them from a live autopilot instead (pymavlink URL, e.g. udpin:0.0.0.0:14550)")
+    fa.add_argument("--base", default="bluerov2_heavy", help="vehicle name or TOML file to start from "
+                                                             "(default bluerov2_heavy)")
+    fa.add_argument("--out", required=True, help="the vehicle file to write")
+    fa.add_argument("--name", default=None, help="the new vehicle's name (default: the --out file's stem)")
+    fa.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for a live autopilot's "
+                                                                 "parameters (default 30)")
+    fa.set_defaults(func=_cmd_from_ardusub)
 
     thr = sub.add_parser("thruster", help="convert between PWM command and thrust for one thruster")
     thr.add_argument("--vehicle", default="udrone", help="packaged name or TOML file (default: udrone)")
@@ -57,6 +70,56 @@ def _load(name: str):
     from rovlab.params.vehicle import load_vehicle
 
     return load_vehicle(name)
+
+
+def _cmd_from_ardusub(args: argparse.Namespace) -> int:
+    """Read the autopilot's parameters, edit a copy of the base vehicle file, say what came from where."""
+    from pathlib import Path
+
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.mavlink import MavlinkMissing
+    from rovlab.interfaces.mavlink.autopilot import ParameterError, fetch_parameters, read_parameters, vehicle_edits
+    from rovlab.params.edit import edit_vehicle_file
+    from rovlab.params.vehicle import load_vehicle, resolve_vehicle_path
+
+    if bool(args.log) == bool(args.connect):
+        raise UserError("give either a log (.tlog or .BIN) or --connect URL")
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise UserError(f"--timeout must be > 0 s, got {args.timeout}")
+    base_path = resolve_vehicle_path(args.base)
+    base = load_vehicle(base_path)
+    out = Path(args.out)
+    if out.suffix.lower() != ".toml":
+        raise UserError(f"--out {out}: a vehicle file is TOML: give a name ending in .toml")
+    if out.exists() and out.resolve() == base_path.resolve():
+        raise UserError(f"--out {out} is the base vehicle file: write the new vehicle to another file")
+    try:
+        if args.log:
+            params = read_parameters(args.log)
+            source = Path(args.log).name
+        else:
+            params, source = fetch_parameters(args.connect, timeout_s=args.timeout)
+        values, notes, lines = vehicle_edits(base, params, source=source)
+    except (ParameterError, ValueError, MavlinkMissing) as exc:
+        raise UserError(str(exc)) from None
+    name = args.name or out.stem
+    values["name"] = name
+    values["description"] = f"{base.description}; thrusters as its ArduSub autopilot describes them ({source})"
+    try:
+        edit_vehicle_file(base_path, values, sources={**notes}, output=out)
+    except OSError as exc:
+        raise UserError(f"cannot write {out}: {exc.strerror or exc}") from None
+    print(f"rovlab vehicle from-ardusub: {name} from {base.name} ({base_path.name}) and the {len(params)} "
+          f"parameters of {source}")
+    for line in lines:
+        print(f"  {line}")
+    kept = [k for k in ("JS_GAIN_DEFAULT", "JS_THR_GAIN", "FS_PILOT_INPUT", "BARO2_GND_PRESS") if k in params]
+    if kept:
+        print("  not a vehicle property, read live by the bridge (and from the log by rovlab filter): "
+              + ", ".join(f"{k} = {params[k]:g}" for k in kept))
+    print(f"  hydrodynamics, masses, thruster positions and curves, sensors: {base.name}'s, unchanged")
+    print(f"wrote {out}")
+    return 0
 
 
 def _cmd_list(args: argparse.Namespace) -> int:

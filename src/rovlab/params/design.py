@@ -35,6 +35,10 @@ tables below, each estimator or controller may own a table named after it (``[mr
     psd = { w = 1e-2, r = 1e-8, b_w = 2e-1, b_r = 1e-3 }   # W of [w_w, w_r, w_bw, w_br]
     bias_time_per_mass = 100.0             # T = 100 M (s per kg), or:
     # bias_time_constant = { w = 1844.0, r = 26.0 }        # [s]
+    thrust_uncertainty = 0.0               # optional: relative sigma of the wrench the thrusters give
+                                           # for their PWM (0: known, as in the thesis's lab; a real
+                                           # vehicle's log: the thrust curve at its voltage, at the
+                                           # surface, on deck) -- rovlab.estimation.kalman.predict_arrays
 
     [initial]
     source = "..."
@@ -191,6 +195,7 @@ class DesignConfig:
     estimator: str = "kf"  # the estimator component (rovlab.core.components.component)
     controller: str = "lqg"  # the controller component
     tables: Mapping[str, Any] = field(default_factory=dict)  # the components' tables the file has, parsed
+    thrust_uncertainty: float = 0.0  # relative sigma of the thrusters' wrench ([process_noise])
 
     def table(self, name: str) -> Any:
         """The component ``name``'s table ([mrac], [ekf], [dp], a plugin's [pd] ...) as parsed from
@@ -314,6 +319,8 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         constants = (bt.number("w", positive=True, plausible=BIAS_TIME_RANGE, what="s"),
                      bt.number("r", positive=True, plausible=BIAS_TIME_RANGE, what="s"))
         bt.finish()
+    thrust_uncertainty = pn.number("thrust_uncertainty", 0.0, nonnegative=True, hi=10.0,
+                                   what="relative sigma of the thrusters' wrench (0.5 = 50 %)")
     pn.finish()
 
     it = top.table("initial")
@@ -379,7 +386,7 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         bias_time_per_mass=per_mass, bias_time_constant=constants, measurements=tuple(measurements),
         initial_state=x0, initial_std=std, lqr_Q=Q, lqr_R=R, lqr_bryson=bryson,
         reference_gain=reference, sources=sources, file=file, estimator=estimator, controller=controller,
-        tables=tables,
+        tables=tables, thrust_uncertainty=thrust_uncertainty,
     )
 
 

@@ -59,7 +59,9 @@ PLAUSIBLE: dict[str, tuple[float, float]] = {
     "K_NL": (0.0, 1.0),  # [N/us^2]
     "rate_hz": (0.01, 1e4),  # sensor sample rate [Hz]
     "variance": (1e-15, 1e4),  # sensor variance per channel [SI units squared]
+    "resolution": (1e-9, 10.0),  # sensor quantisation step per channel [SI units]
 }
+SENSOR_REPORTS = ("measurement", "estimate")  # a raw sensor's samples, or an autopilot's estimate
 
 
 def _frozen(a: Any) -> np.ndarray:
@@ -105,6 +107,11 @@ class Sensor:
     rate_hz: float
     variance: Mapping[str, float]  # channel -> variance (SI units squared)
     source: str = ""
+    # what it sends: "measurement" (a raw sensor: its samples scatter like white noise) or
+    # "estimate" (an autopilot's own filtered output, e.g. ArduSub's AHRS heading: smooth, so its
+    # scatter says nothing about a frozen value; only an exact repetition does)
+    reports: str = "measurement"
+    resolution: Mapping[str, float] = field(default_factory=dict)  # channel -> quantisation step (SI)
 
     def channels(self) -> tuple[str, ...]:
         return tuple(self.variance)
@@ -373,10 +380,13 @@ def _read_sensor(s: TableReader) -> Sensor:
     variance = s.numbers_table("variance", channels, positive=True, plausible=PLAUSIBLE["variance"])
     if kind in SENSOR_CHANNELS and not variance:
         s.problem("variance", {}, "a variance for at least one of " + ", ".join(channels))
+    reports = s.string("reports", "measurement", choices=SENSOR_REPORTS)
+    resolution = s.numbers_table("resolution", channels, positive=True, plausible=PLAUSIBLE["resolution"]) \
+        if s.has("resolution") else {}
     source = s.string("source", "")
     s.finish()
     return Sensor(name=name, kind=kind, position=_frozen(position), rate_hz=rate,
-                  variance=dict(variance), source=source)
+                  variance=dict(variance), source=source, reports=reports, resolution=dict(resolution))
 
 
 def _check_configuration(thrusters: tuple[Thruster, ...], col: Collector) -> None:

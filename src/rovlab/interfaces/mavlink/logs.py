@@ -77,13 +77,16 @@ class TelemetryRecorder:
 # --------------------------------------------------------------------------------------------
 
 def read_records(path: str | Path) -> list[Record]:
-    """The MAVLink messages of a .tlog or of an MCAP recorded by :class:`TelemetryRecorder`."""
+    """The MAVLink messages of a .tlog, of an MCAP recorded by :class:`TelemetryRecorder`, or of an
+    onboard DataFlash .BIN log as the MAVLink messages they correspond to (:func:`_read_bin`)."""
     path = Path(path)
     if not path.is_file():
         raise LogError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix == ".tlog":
         records = _read_tlog(path)
+    elif suffix == ".bin":
+        records = _read_bin(path)
     elif suffix == ".mcap":
         try:
             from rovlab.io.timeseries import read_mcap_json
@@ -95,7 +98,9 @@ def read_records(path: str | Path) -> list[Record]:
         except Exception as exc:  # noqa: BLE001 - the mcap reader raises its own types on a bad file
             raise LogError(f"{path}: not a readable MCAP file ({exc})") from None
     else:
-        raise LogError(f"{path}: expected a .tlog (MAVLink telemetry log) or an .mcap recorded by rovlab mavlink")
+        raise LogError(f"{path}: not a log rovlab reads: expected a .tlog (MAVLink telemetry: QGroundControl, "
+                       "MAVProxy, BlueOS), a .BIN (ArduSub's onboard DataFlash log) or an .mcap recorded by "
+                       "rovlab mavlink")
     if not records:
         raise LogError(f"{path}: no MAVLink messages in it")
     return records
@@ -121,6 +126,50 @@ def _read_tlog(path: Path) -> list[Record]:
             fields["_sysid"] = msg.get_srcSystem()
             fields["_compid"] = msg.get_srcComponent()
             out.append((float(getattr(msg, "_timestamp", 0.0)), kind, fields))
+    finally:
+        mlog.close()
+    return out
+
+
+def _read_bin(path: Path) -> list[Record]:
+    """An ArduSub DataFlash log (.BIN, read by pymavlink's DFReader) as the MAVLink messages that
+    carry the same quantities, so one mapping (:class:`SampleMap`) serves both: BARO of instance 1
+    (the external Bar30; Press in Pa) -> SCALED_PRESSURE2.press_abs [hPa]; ATT (Roll, Pitch, Yaw in
+    degrees, the AHRS attitude) -> ATTITUDE [rad], with yawspeed the latest IMU (instance 0) GyrZ
+    [rad/s]; RCOU C1..C16 -> SERVO_OUTPUT_RAW servo1_raw..; PARM -> PARAM_VALUE. Times: the log's
+    own (boot time, or UTC once the autopilot had it) [s]."""
+    from rovlab.interfaces.mavlink import mavutil
+
+    try:
+        mlog = mavutil().mavlink_connection(str(path))
+    except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on a corrupt file
+        raise LogError(f"{path}: not a readable DataFlash log ({type(exc).__name__}: {exc})") from None
+    out: list[Record] = []
+    gyro_z = math.nan
+    try:
+        while True:
+            try:
+                msg = mlog.recv_match(type=["BARO", "ATT", "IMU", "RCOU", "PARM"])
+            except Exception:  # noqa: BLE001 - a corrupt tail ends the log
+                break
+            if msg is None:
+                break
+            kind = msg.get_type()
+            t = float(getattr(msg, "_timestamp", 0.0))
+            if kind == "IMU":
+                if int(getattr(msg, "I", 0)) == 0:
+                    gyro_z = _num(getattr(msg, "GyrZ", math.nan))
+            elif kind == "BARO":
+                if int(getattr(msg, "I", 0)) == 1:
+                    out.append((t, "SCALED_PRESSURE2", {"press_abs": _num(msg.Press) / 100.0}))
+            elif kind == "ATT":
+                yaw = math.radians(_num(msg.Yaw))
+                out.append((t, "ATTITUDE", {"roll": math.radians(_num(msg.Roll)), "pitch": math.radians(_num(msg.Pitch)),
+                                            "yaw": math.atan2(math.sin(yaw), math.cos(yaw)), "yawspeed": gyro_z}))
+            elif kind == "RCOU":
+                out.append((t, "SERVO_OUTPUT_RAW", {f"servo{i}_raw": getattr(msg, f"C{i}", 0) for i in range(1, 17)}))
+            elif kind == "PARM":
+                out.append((t, "PARAM_VALUE", {"param_id": str(msg.Name), "param_value": _num(msg.Value)}))
     finally:
         mlog.close()
     return out
@@ -194,6 +243,19 @@ def vehicle_sysid(records: Iterable[Record]) -> int | None:
     return None
 
 
+def log_parameters(records: Iterable[Record]) -> dict[str, float]:
+    """The autopilot parameters a log carries: the last PARAM_VALUE of each name (a .BIN's PARM
+    become PARAM_VALUE in :func:`read_records`)."""
+    out: dict[str, float] = {}
+    for _t, kind, f in records:
+        if kind == "PARAM_VALUE":
+            name = str(f.get("param_id", "")).split("\x00", 1)[0].strip()
+            v = _num(f.get("param_value"))
+            if name and math.isfinite(v):
+                out[name] = v
+    return out
+
+
 def surface_pressure_hpa(records: Iterable[Record]) -> float | None:
     """BARO2_GND_PRESS [Pa] as the vehicle reported it (PARAM_VALUE), in hPa."""
     for _t, kind, f in records:
@@ -253,12 +315,13 @@ def filter_columns(records: list[Record], vehicle: Vehicle, channels: tuple[Any,
 
 
 def write_filter_log(log: str | Path, vehicle: Vehicle, model: Any, out: str | Path, *,
-                     surface_hpa: float | None = None) -> dict[str, Any]:
-    """Convert a .tlog/.mcap into the CSV ``rovlab filter`` reads (model: the filter model, for its
-    channels and sample time); returns a summary (rows, samples per channel)."""
+                     surface_hpa: float | None = None, records: list[Record] | None = None) -> dict[str, Any]:
+    """Convert a .tlog/.BIN/.mcap into the CSV ``rovlab filter`` reads (model: the filter model, for
+    its channels and sample time; ``records``: the log's, if already read); returns a summary (rows,
+    samples per channel)."""
     from rovlab.io.logwriter import write_csv
 
-    records = read_records(log)
+    records = read_records(log) if records is None else records
     cols = filter_columns(records, vehicle, tuple(model.channels), float(model.h), surface_hpa=surface_hpa,
                           file=str(log))
     write_csv(out, cols, comments=[f"converted from {log} by rovlab mavlink for vehicle {vehicle.name}",
