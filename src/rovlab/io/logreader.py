@@ -315,8 +315,8 @@ class LogStream:
         return header
 
     # -- line numbers (error path only) --------------------------------------------------------
-    def _blocks(self) -> Iterator[tuple[bytes, int]]:
-        """Blocks of whole lines after the header, with the number of lines before each."""
+    def _blocks(self) -> Iterator[tuple[bytes, int, int]]:
+        """Blocks of whole lines after the header: (bytes, lines before it, lines in it)."""
         block_bytes = max(1 << 12, 64 * self.chunk_rows)
         with open(self.path, "rb") as f:
             f.seek(self._data_start)
@@ -334,15 +334,16 @@ class LogStream:
                 else:
                     rest = b""
                 if data:
-                    yield data, line
-                    line += len(split_lines(data)) if b"\r" in data else data.count(b"\n") + (not data.endswith(b"\n"))
+                    count = len(split_lines(data)) if b"\r" in data else data.count(b"\n") + (not data.endswith(b"\n"))
+                    yield data, line, count
+                    line += count
                 if not block:
                     break
 
     def line_of(self, row: int) -> int | None:
         """File line of a data row (counted on demand: for messages)."""
         seen = 0
-        for data, line in self._blocks():
+        for data, line, _ in self._blocks():
             rows = np.flatnonzero(split_lines(data).kind == DATA)
             if row < seen + rows.size:
                 return line + int(rows[row - seen]) + 1
@@ -366,27 +367,27 @@ class LogStream:
     def _chunks(self) -> Iterator[LogChunk]:
         self.rows = 0
         self._last_t = (math.nan, 0)  # (time, line or 0 if unknown) of the last row yielded
-        for data, line in self._blocks():
-            chunk = self._parse_block(data, line)
+        for data, line, count in self._blocks():
+            chunk = self._parse_block(data, line, count)
             if chunk is not None:
                 yield chunk
         if self.rows == 0:
             raise ConfigError([Problem(self.file, "", "no data rows", "at least one row after the header")], "log")
 
-    def _parse_block(self, data: bytes, line: int) -> LogChunk | None:
-        """The rows of one block of whole lines (the first is line ``line + 1``)."""
-        values = self._numbers(data) if self._fast else None
+    def _parse_block(self, data: bytes, line: int, count: int) -> LogChunk | None:
+        """The rows of one block of ``count`` whole lines (the first is line ``line + 1``)."""
+        values = self._numbers(data, count) if self._fast else None
         if values is not None:
             return self._chunk(values, None)
         return self._checked_block(data, line)
 
-    def _numbers(self, data: bytes) -> dict[str, np.ndarray] | None:
+    def _numbers(self, data: bytes, count: int) -> dict[str, np.ndarray] | None:
         """The block parsed straight into numbers, or None if it needs the checked reading: pyarrow
         could not, a row is not one line, or a value or the time order needs a closer look."""
         import pyarrow as pa
         import pyarrow.csv as pcsv
 
-        if data.startswith(b"#") or b"\n#" in data or b"\r#" in data:
+        if b"#" in data and (data.startswith(b"#") or b"\n#" in data or b"\r#" in data):
             return None  # comment lines
         try:
             table = pcsv.read_csv(
@@ -397,8 +398,8 @@ class LogStream:
                     null_values=list(MISSING), strings_can_be_null=False, quoted_strings_can_be_null=True))
         except pa.ArrowInvalid:
             return None
-        if table.num_rows != data.count(b"\n") + (not data.endswith(b"\n")):
-            return None  # blank lines, a lone \r or a quoted line break
+        if table.num_rows != count:
+            return None  # blank lines or a quoted line break
         values = {}
         suspicious = False
         for c in self.need:

@@ -126,15 +126,26 @@ class ChunkWriter:
         self._pool: Any = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rovlab-csv")
 
     def _format(self, columns: Mapping[str, Any]) -> Any:
-        """One chunk as CSV rows (a pyarrow buffer), on the worker thread."""
+        """One chunk as CSV rows (a pyarrow buffer), on the worker thread. The columns to round are
+        rounded together, as one array (a few numpy calls a chunk: this thread holds the GIL
+        between them, and the filter's thread waits for it)."""
+        digits = self.significant
+        rounded = [name for name in self.names if digits is not None and name not in self.exact
+                   and isinstance(columns[name], np.ndarray) and columns[name].dtype.kind == "f"]
+        if rounded and digits is not None:
+            block = np.empty((len(columns[rounded[0]]), len(rounded)), order="F")
+            for j, name in enumerate(rounded):
+                block[:, j] = columns[name]
+            block = np.asfortranarray(round_significant(block, digits))  # each column contiguous
         arrays: list[Any] = []
         for name in self.names:
             col = columns[name]
             if isinstance(col, tuple):
                 arrays.append(labels(*col))
+            elif name in rounded:
+                arrays.append(floats(block[:, rounded.index(name)]))
             elif isinstance(col, np.ndarray) and col.dtype.kind == "f":
-                digits = None if name in self.exact else self.significant
-                arrays.append(floats(col if digits is None else round_significant(col, digits)))
+                arrays.append(floats(col))
             else:  # text (or integers, written exactly)
                 arrays.append(strings([str(v) for v in (col.tolist() if hasattr(col, "tolist") else col)]))
         return csv_rows(arrays, self.names)
