@@ -249,7 +249,7 @@ class LogStream:
     (``fast``); a block it cannot read so, or with a comment or blank line, a cell it reads as
     inf or NaN, or times out of order, is read again as text and checked cell by cell like
     :func:`read_log` (up to 20 problems a block, each with its line and column). ``fast=False``
-    checks every block so. Lines are counted only when a message needs one (:meth:`where`).
+    checks every block so. A row's file line is found only when a message needs one (:meth:`where`).
 
     The blocks are parsed on a reader thread, at most ``PREFETCH`` chunks ahead of the consumer
     (pyarrow parses without the GIL); iterating raises :class:`ConfigError` at the first chunk
