@@ -9,8 +9,16 @@ all the estimation and control; this module only translates:
   sample stamped with its arrival time and pushed into the node core;
 * out: the node core's thruster PWM commands, read back as ArduSub motor outputs and turned into
   the pilot inputs whose ArduSub mix comes closest (rovlab.allocation.mixing.Mixer), sent as
-  MANUAL_CONTROL in ArduSub's ranges (scaled by the vehicle's JS_GAIN_DEFAULT and JS_THR_GAIN)
-  or as RC_CHANNELS_OVERRIDE pulses on channels 3-6.
+  MANUAL_CONTROL in ArduSub's ranges (scaled by the vehicle's live pilot gain, NAMED_VALUE_FLOAT
+  "PilotGain", and its JS_THR_GAIN) or as RC_CHANNELS_OVERRIDE pulses on channels 3-6.
+
+On a shared link (QGroundControl or MAVProxy on the same vehicle) a ground station's
+REQUEST_DATA_STREAM resets the rates the bridge set with MAV_CMD_SET_MESSAGE_INTERVAL (ArduPilot
+applies the group rate to every message of the group). So the bridge measures the rate at which
+each message it needs arrives, asks again when it falls below what it asked for, and says so --
+once per episode -- when it cannot get it. It reads the parameters it needs under either
+generation of names (ArduSub 4.7's MAV_GCS_SYSID, 4.1's SYSID_MYGCS), asking a bounded number of
+times.
 
 Safety, as the issue asks: the bridge sends its own HEARTBEAT (1 Hz, as a ground station);
 it sends MANUAL_CONTROL only once the vehicle reported its joystick gains (or 5 s passed);
@@ -36,7 +44,7 @@ import numpy as np
 
 from rovlab.allocation.mixing import Mixer
 from rovlab.interfaces.mavlink import dialect, mavutil
-from rovlab.interfaces.mavlink.ardusub import MODES
+from rovlab.interfaces.mavlink.ardusub import DATA_STREAM_NAMES, MODES, MY_GCS, MY_GCS_HIGH, STREAM_OF_MESSAGE
 from rovlab.interfaces.mavlink.logs import SampleMap, TelemetryRecorder
 from rovlab.interfaces.mavlink.units import RC_CHANNEL, drain, manual_control_from_inputs, rc_pulse_from_input
 from rovlab.interfaces.node.core import NodeCore
@@ -45,8 +53,18 @@ from rovlab.params.vehicle import Vehicle
 
 TELEMETRY = frozenset({"ATTITUDE", "SCALED_PRESSURE2", "LOCAL_POSITION_NED", "VISION_POSITION_ESTIMATE",
                        "SERVO_OUTPUT_RAW", "VFR_HUD", "SYS_STATUS"})
-_PARAMS_WANTED = ("JS_GAIN_DEFAULT", "JS_THR_GAIN", "BARO2_GND_PRESS", "SYSID_MYGCS")
+# what the bridge reads -> the names ArduSub has given it, newest first (4.7 renamed SYSID_MYGCS)
+_PARAMS_WANTED: dict[str, tuple[str, ...]] = {
+    "JS_GAIN_DEFAULT": ("JS_GAIN_DEFAULT",), "JS_THR_GAIN": ("JS_THR_GAIN",),
+    "BARO2_GND_PRESS": ("BARO2_GND_PRESS",), "GCS_SYSID": (MY_GCS["4.7"], MY_GCS["4.1"]),
+}
+_PARAM_TRIES = 10  # requests (one a second) before the bridge says what the vehicle did not report
 _STREAMS = {"ATTITUDE": 30, "SCALED_PRESSURE2": 137, "SERVO_OUTPUT_RAW": 36}  # MAVLink message ids
+RATE_WINDOW_S = 2.0  # a stream's rate is measured over this long, from this long after asking
+RATE_TOLERANCE = 0.75  # below this share of the rate asked for, the bridge asks again
+RATE_ASKS = 3  # requests in a row without the rate before the bridge says it cannot get it
+RATE_BACKOFF_S = 5.0  # then it keeps asking at this interval
+RATE_RESETS_SAID = 3  # resets of one stream said in the log; later ones only counted
 COMMAND_MODES = ("manual_control", "rc_override")
 
 
@@ -91,7 +109,11 @@ class MavlinkBridge:
                                                             "config": config.name}) if record else None
         # what we know of the vehicle
         self.params: dict[str, float] = {"JS_GAIN_DEFAULT": 0.5, "JS_THR_GAIN": 1.0}  # ArduSub's defaults
-        self.confirmed: set[str] = set()  # parameters the vehicle has reported
+        self.confirmed: set[str] = set()  # what the vehicle has reported (the keys of _PARAMS_WANTED, PilotGain)
+        self.param_names: dict[str, str] = {}  # key of _PARAMS_WANTED -> the name the vehicle has
+        self._wanted = dict(_PARAMS_WANTED)
+        self._param_asks: dict[str, int] = dict.fromkeys(self._wanted, 0)
+        self.live_gain: float | None = None  # NAMED_VALUE_FLOAT PilotGain
         self.vehicle_seen = False
         self._first_seen: float | None = None
         self.armed = False
@@ -102,11 +124,20 @@ class MavlinkBridge:
         self.inputs = np.zeros(4)  # normalised [forward, lateral, throttle, yaw] last sent
         self.failsafe = False
         self.sent: collections.deque[tuple[float, tuple[int, ...], bool]] = collections.deque(maxlen=2000)
+        self.sent_gains: tuple[float, float] | None = None  # (pilot gain, JS_THR_GAIN) of the last MANUAL_CONTROL
         self.counts: dict[str, int] = {"received": 0, "bad_data": 0, "errors": 0, "commands": 0, "neutral": 0,
-                                       "failsafes": 0}
+                                       "failsafes": 0, "rate_requests": 0, "rate_resets": 0, "rate_failures": 0}
+        # the telemetry rates we need: arrivals, when we last asked, requests in a row without the rate
+        self.rate_wanted = {name: 1.0 / self.core.h for name in _STREAMS}
+        self.rates: dict[str, float | None] = dict.fromkeys(_STREAMS)  # measured [Hz]; None before a full window
+        self.rate_short: set[str] = set()  # streams arriving below RATE_TOLERANCE of the rate wanted
+        self._arrivals: dict[str, collections.deque[float]] = {n: collections.deque(maxlen=1000) for n in _STREAMS}
+        self._asked_at: dict[str, float] = {}
+        self._rate_asks = dict.fromkeys(_STREAMS, 0)
+        self._said_cannot: set[str] = set()  # streams said to be out of reach in their current episode
+        self._resets = dict.fromkeys(_STREAMS, 0)
         self._armed_by_us = False
-        self._due: dict[str, float] = {"heartbeat": 0.0, "command": 0.0, "params": 0.0, "arm": 0.0}
-        self._streams_asked = False
+        self._due: dict[str, float] = {"heartbeat": 0.0, "command": 0.0, "params": 0.0, "arm": 0.0, "rates": 0.0}
         self._queue: collections.deque[tuple[str, float, dict[str, Any]]] = collections.deque(maxlen=20000)
         self._stop = threading.Event()
         self._last_command_time: float | None = None
@@ -212,9 +243,20 @@ class MavlinkBridge:
         if kind == "STATUSTEXT":
             self.log(f"vehicle says: {msg.text}")
             return
+        if kind == "NAMED_VALUE_FLOAT":
+            self._on_named_float(msg)
+            return
+        if kind == "COMMAND_ACK":
+            if msg.command == self.mav.MAV_CMD_SET_MESSAGE_INTERVAL and msg.result != self.mav.MAV_RESULT_ACCEPTED:
+                self._warn_once(f"interval-{msg.result}", f"the vehicle refused MAV_CMD_SET_MESSAGE_INTERVAL (MAV_RESULT "
+                                                          f"{msg.result}): the telemetry rates stay as its stream "
+                                                          "rates (SRn_*) give them")
+            return
         if kind not in TELEMETRY:
             return
         self.last_telemetry = now
+        if kind in self._arrivals:
+            self._arrivals[kind].append(now)
         fields = msg.to_dict()
         if kind == "SERVO_OUTPUT_RAW":
             n = len(self.mixer.thruster_names)
@@ -226,16 +268,63 @@ class MavlinkBridge:
 
     def _on_param(self, msg: Any) -> None:
         name = str(msg.param_id).split("\x00", 1)[0]
-        if name not in _PARAMS_WANTED or not math.isfinite(msg.param_value):
+        key = next((k for k, names in self._wanted.items() if name in names), None)
+        if key is None or not math.isfinite(msg.param_value):
             return
         self.params[name] = float(msg.param_value)
-        self.confirmed.add(name)
+        self.confirmed.add(key)
+        self.param_names[key] = name
         if name == "BARO2_GND_PRESS" and msg.param_value > 0:
             self.smap.surface_hpa = float(msg.param_value) / 100.0
-        if name == "SYSID_MYGCS" and int(msg.param_value) != self.sysid:
-            self._warn_once("mygcs", f"the vehicle's SYSID_MYGCS is {int(msg.param_value)}, the bridge is system "
-                                     f"{self.sysid}: ArduSub ignores its commands (use --sysid "
-                                     f"{int(msg.param_value)} or set SYSID_MYGCS)")
+        if name == MY_GCS["4.7"] and "GCS_SYSID_HI" not in self._wanted:  # 4.7: a range of ids may count as the GCS
+            self._wanted["GCS_SYSID_HI"] = (MY_GCS_HIGH,)
+            self._param_asks["GCS_SYSID_HI"] = 0
+        if key in ("GCS_SYSID", "GCS_SYSID_HI"):
+            self._check_gcs_sysid()
+
+    @property
+    def firmware_names(self) -> str | None:
+        """Which generation of parameter names the vehicle has: "4.7" (MAV_GCS_SYSID), "4.1"
+        (SYSID_MYGCS), None before it said."""
+        name = self.param_names.get("GCS_SYSID")
+        return None if name is None else ("4.7" if name == MY_GCS["4.7"] else "4.1")
+
+    def _check_gcs_sysid(self) -> None:
+        """ArduSub obeys MANUAL_CONTROL and RC overrides from its ground station's system id only
+        (4.7: or from MAV_GCS_SYSID to MAV_GCS_SYSID_HI when that is higher)."""
+        name = self.param_names.get("GCS_SYSID")
+        if name is None:
+            return
+        low = int(self.params[name])
+        high = int(self.params.get(MY_GCS_HIGH, 0)) if name == MY_GCS["4.7"] else 0
+        if self.sysid == low or low <= self.sysid <= high:
+            return
+        where = f"{name} is {low}" + (f" ({MY_GCS_HIGH} {high})" if high else "")
+        self._warn_once(f"mygcs-{low}-{high}", f"the vehicle's {where}, the bridge is system {self.sysid}: ArduSub "
+                                               f"ignores its commands (use --sysid {low} or set {name})")
+
+    def _on_named_float(self, msg: Any) -> None:
+        """NAMED_VALUE_FLOAT "PilotGain": the joystick gain ArduSub applies to MANUAL_CONTROL now
+        (JS_GAIN_DEFAULT at boot, then whatever the pilot's gain buttons made of it)."""
+        name = msg.name.decode("ascii", "replace") if isinstance(msg.name, bytes) else str(msg.name)
+        if name.split("\x00", 1)[0] != "PilotGain":
+            return
+        gain = float(msg.value)
+        if not (math.isfinite(gain) and 0.0 < gain <= 1.0):
+            self._warn_once("gain-range", f"ignoring PilotGain {gain!r} from the vehicle: expected 0 .. 1")
+            return
+        old = self.live_gain
+        self.live_gain = gain
+        self.confirmed.add("PilotGain")
+        if old is not None and abs(gain - old) > 1e-4:
+            self.log(f"the vehicle's pilot gain changed from {old:g} to {gain:g}: MANUAL_CONTROL is scaled to it")
+
+    def pilot_gain(self) -> float:
+        """The gain ArduSub applies to MANUAL_CONTROL: the live PilotGain, else JS_GAIN_DEFAULT (the
+        gain at boot), else ArduSub's default 0.5."""
+        if self.live_gain is not None:
+            return self.live_gain
+        return self.params.get("JS_GAIN_DEFAULT", 0.5) or 0.5
 
     # -- outgoing ------------------------------------------------------------------------------
     def _housekeeping(self, now: float) -> None:
@@ -245,16 +334,15 @@ class MavlinkBridge:
             out.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE)
         if not self.vehicle_seen:
             return
-        if now >= self._due["params"] and any(p not in self.confirmed for p in _PARAMS_WANTED):
+        if now >= self._due["params"]:
             self._due["params"] = now + 1.0
-            for name in _PARAMS_WANTED:
-                if name not in self.confirmed:
-                    out.param_request_read_send(self.target_system, 1, name.encode(), -1)
-        if not self._streams_asked:
-            self._streams_asked = True  # ask once for the telemetry at the control rate (ArduSub honours it)
-            for msg_id in _STREAMS.values():
-                out.command_long_send(self.target_system, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
-                                      int(self.core.h * 1e6), 0, 0, 0, 0, 0)
+            self._ask_params()
+        if not self._asked_at:  # first sight: ask for the telemetry at the control rate
+            for name in _STREAMS:
+                self._ask_rate(name, now)
+        elif now >= self._due["rates"]:
+            self._due["rates"] = now + 0.5
+            self._check_rates(now)
         if self.want_arm and not self.armed and now >= self._due["arm"]:
             self._due["arm"] = now + 1.0
             if self.mode != MODES["MANUAL"]:
@@ -265,14 +353,78 @@ class MavlinkBridge:
                                       0, 0)
                 self._armed_by_us = True
 
+    def _ask_params(self) -> None:
+        """PARAM_REQUEST_READ, under every name it has had, for each parameter not reported yet; after
+        _PARAM_TRIES requests say once what is missing and stop asking."""
+        for key, names in self._wanted.items():
+            if key in self.confirmed:
+                continue
+            if self._param_asks[key] >= _PARAM_TRIES:
+                self._warn_once(f"param-{key}", f"the vehicle did not report {' or '.join(names)} after "
+                                                f"{_PARAM_TRIES} requests: {_MISSING[key]}")
+                continue
+            self._param_asks[key] += 1
+            for name in names:
+                self.conn.mav.param_request_read_send(self.target_system, 1, name.encode(), -1)
+
+    def _ask_rate(self, name: str, now: float) -> None:
+        self._asked_at[name] = now
+        self.counts["rate_requests"] += 1
+        self.conn.mav.command_long_send(self.target_system, 1, self.mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                        _STREAMS[name], int(round(1e6 / self.rate_wanted[name])), 0, 0, 0, 0, 0)
+
+    def _check_rates(self, now: float) -> None:
+        """Measure each needed stream over the last RATE_WINDOW_S; ask again when it falls short
+        (a ground station's REQUEST_DATA_STREAM resets it), say so once per episode, and say when
+        it is back."""
+        for name, wanted in self.rate_wanted.items():
+            if now - self._asked_at[name] < RATE_WINDOW_S:
+                continue  # a full window after the last request
+            arrivals = self._arrivals[name]
+            rate = sum(1 for t in arrivals if t > now - RATE_WINDOW_S) / RATE_WINDOW_S
+            self.rates[name] = rate
+            if rate >= RATE_TOLERANCE * wanted:
+                if name in self.rate_short:
+                    self.rate_short.discard(name)
+                    if name in self._said_cannot:
+                        self.log(f"{name} arrives at {rate:.1f} Hz again (asked for {wanted:g} Hz)")
+                    self._said_cannot.discard(name)
+                self._rate_asks[name] = 0
+                continue
+            group = DATA_STREAM_NAMES.get(STREAM_OF_MESSAGE.get(name, -1), "?")
+            asks = self._rate_asks[name]
+            if name not in self.rate_short:  # a new episode: the rate was reset (or never came)
+                self.rate_short.add(name)
+                self.counts["rate_resets"] += 1
+                self._resets[name] += 1
+                if self._resets[name] <= RATE_RESETS_SAID:
+                    self.log(f"{name} arrives at {rate:.1f} Hz, not the {wanted:g} Hz asked for (a ground station on "
+                             f"the link may have reset its stream group {group}): asking again"
+                             + (" (further resets are counted, not said)" if self._resets[name] == RATE_RESETS_SAID
+                                else ""))
+            if asks >= RATE_ASKS:
+                if name not in self._said_cannot:
+                    self._said_cannot.add(name)
+                    self.counts["rate_failures"] += 1
+                    self.log(f"cannot get {name} at {wanted:g} Hz: it arrives at {rate:.1f} Hz after {asks} requests "
+                             f"(the estimator works with fewer samples; set the vehicle's SRn_{group} rate or the "
+                             "other ground station's stream rates)")
+                if now - self._asked_at[name] < RATE_BACKOFF_S:
+                    continue
+            self._rate_asks[name] = asks + 1
+            self._ask_rate(name, now)
+
     def _gains_known(self, now: float) -> bool:
-        """MANUAL_CONTROL is scaled by the vehicle's joystick gains: wait for them (5 s at most, then
-        ArduSub's defaults, said once). RC overrides do not depend on them."""
-        if self.command != "manual_control" or {"JS_GAIN_DEFAULT", "JS_THR_GAIN"} <= self.confirmed:
+        """MANUAL_CONTROL is scaled by the live pilot gain and JS_THR_GAIN: wait for them (5 s at
+        most, then what is known: JS_GAIN_DEFAULT, ArduSub's defaults, said once). RC overrides do
+        not depend on them."""
+        if self.command != "manual_control" or {"PilotGain", "JS_THR_GAIN"} <= self.confirmed:
             return True
         if self._first_seen is not None and now - self._first_seen > 5.0:
-            self._warn_once("gains", "the vehicle did not report JS_GAIN_DEFAULT / JS_THR_GAIN: assuming "
-                                     f"{self.params['JS_GAIN_DEFAULT']:g} / {self.params['JS_THR_GAIN']:g}")
+            missing = [what for key, what in (("PilotGain", "the live pilot gain (NAMED_VALUE_FLOAT PilotGain)"),
+                                              ("JS_THR_GAIN", "JS_THR_GAIN")) if key not in self.confirmed]
+            self._warn_once("gains", f"the vehicle did not report {' and '.join(missing)}: assuming pilot gain "
+                                     f"{self.pilot_gain():g}, JS_THR_GAIN {self.params['JS_THR_GAIN']:g}")
             return True
         return False
 
@@ -303,8 +455,9 @@ class MavlinkBridge:
         self.inputs = np.asarray(inputs, dtype=float).copy()
         self._last_command_time = now
         if self.command == "manual_control":
-            gain = self.params.get("JS_GAIN_DEFAULT", 0.5) or 0.5
+            gain = self.pilot_gain()
             thr = self.params.get("JS_THR_GAIN", 1.0) or 1.0
+            self.sent_gains = (gain, thr)
             x, y, z, r = manual_control_from_inputs(self.inputs, gain=gain, throttle_gain=thr)
             self.conn.mav.manual_control_send(self.target_system, x, y, z, r, 0)
             sent: tuple[int, ...] = (x, y, z, r)
@@ -323,3 +476,13 @@ class MavlinkBridge:
         if key not in self._warned:
             self._warned.add(key)
             self.log(text)
+
+
+# what the bridge does without a parameter the vehicle never reported
+_MISSING = {
+    "JS_GAIN_DEFAULT": "the pilot gain is the live PilotGain if reported, else ArduSub's default 0.5",
+    "JS_THR_GAIN": "assuming ArduSub's default 1",
+    "BARO2_GND_PRESS": "depth is measured from 1013.25 hPa",
+    "GCS_SYSID": "cannot check that the vehicle obeys the bridge's system id",
+    "GCS_SYSID_HI": "assuming no range of ground station ids",
+}

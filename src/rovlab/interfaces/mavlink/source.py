@@ -67,7 +67,9 @@ class MavlinkSource:
             "engaged": bool(core.engaged),
             "sensors": dict(core.sensor_enabled),
             "filter_modes": core.filter_modes(),
-            "vehicle": {"seen": br.vehicle_seen, "armed": br.armed, "mode": br.mode, "failsafe": br.failsafe},
+            "vehicle": {"seen": br.vehicle_seen, "armed": br.armed, "mode": br.mode, "failsafe": br.failsafe,
+                        "pilot_gain": br.pilot_gain(), "parameter_names": br.firmware_names,
+                        "rates_hz": dict(br.rates), "rates_short": sorted(br.rate_short)},
         }
 
     def advance(self, n: int) -> list[tuple[str, float, dict[str, Any]]]:
