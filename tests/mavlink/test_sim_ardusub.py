@@ -216,3 +216,24 @@ def test_parameter_generations_4_1_and_4_7():
         assert new.sim.gain == pytest.approx(0.75)
     finally:
         new.close()
+
+
+def test_mavlink_ftp_is_refused_at_once(rig):
+    """The simulator has no files: an FTP open is answered NAK FileNotFound (seq + 1, the request's
+    opcode), ending a session ACK, so a ground station falls back to the parameter protocol at once
+    instead of waiting for timeouts (MAVProxy tries @PARAM/param.pck first)."""
+    import struct
+
+    header = struct.Struct("<HBBBBBBI")
+    name = b"@PARAM/param.pck"
+    for seq, opcode, body in ((7, 4, name), (9, 1, b"")):  # OpenFileRO, TerminateSession
+        payload = (header.pack(seq, 3, opcode, len(body), 0, 0, 0, 0) + body).ljust(251, b"\0")
+        rig.mav.file_transfer_protocol_send(0, 1, 1, list(payload))
+        reply = next(m for m in rig.run(0.1) if m.get_type() == "FILE_TRANSFER_PROTOCOL")
+        got = bytes(reply.payload)
+        r_seq, r_session, r_opcode, r_size, r_req = header.unpack_from(got)[:5]
+        assert (r_seq, r_session, r_req) == (seq + 1, 3, opcode)
+        if opcode == 4:
+            assert (r_opcode, r_size, got[header.size]) == (129, 1, 10)  # NAK, ERR_FileNotFound
+        else:
+            assert (r_opcode, r_size) == (128, 0)  # ACK

@@ -24,8 +24,9 @@ What it does, as a stock BlueROV2 running ArduSub would (docs/mavlink.md has the
   MAV_CMD_DO_SET_MODE or SET_MODE, each answered by COMMAND_ACK; MANUAL and STABILIZE are
   simulated (identical here: roll and pitch are not modelled), other modes are refused;
   MAV_CMD_GET_HOME_POSITION is answered with HOME_POSITION and GPS_GLOBAL_ORIGIN (or FAILED
-  without a home, as ArduPilot does); AUTOPILOT_VERSION is sent on request and a mission list
-  request gets an empty list (what ground stations ask at connect);
+  without a home, as ArduPilot does); AUTOPILOT_VERSION is sent on request, a mission list
+  request gets an empty list and MAVLink FTP requests are refused at once (no files), so a ground
+  station reads the parameters with the parameter protocol (what ground stations ask at connect);
 * answers the parameter protocol (PARAM_REQUEST_LIST, PARAM_REQUEST_READ, PARAM_SET ->
   PARAM_VALUE, with ArduSub's types) for rovlab.interfaces.mavlink.ardusub.sim_parameters of one
   generation of names: 4.7 (MAV_SYSID, MAV_GCS_SYSID, MAV_GCS_SYSID_HI; the default) or 4.1
@@ -47,6 +48,7 @@ counted and answered where MAVLink has an answer; the endpoint keeps running.
 from __future__ import annotations
 
 import math
+import struct
 import threading
 import time
 from collections.abc import Callable
@@ -369,6 +371,27 @@ class ArduSubSim:
                             f"system {msg.get_srcSystem()} asked for stream group {group} at {rate} Hz: {what}",
                             send=False)
 
+    def _on_file_transfer(self, msg: Any, now: float) -> None:
+        """MAVLink FTP: the simulator has no files. Ending a session is acknowledged, a file or
+        directory request refused at once (NAK FileNotFound), anything else NAK Fail, so a ground
+        station that tries FTP for the parameters falls back to the parameter protocol without
+        waiting for timeouts."""
+        if msg.target_system not in (0, self.sysid):
+            return
+        payload = bytes(msg.payload)
+        if len(payload) < _FTP_HEADER.size:
+            self.counts["refused"] += 1
+            return
+        seq, session, opcode = _FTP_HEADER.unpack_from(payload)[:3]
+        if opcode in (_FTP_TERMINATE_SESSION, _FTP_RESET_SESSIONS):
+            reply, size, error = _FTP_ACK, 0, b""
+        else:
+            reply, size = _FTP_NAK, 1
+            error = bytes([_FTP_ERR_FILE_NOT_FOUND if opcode in _FTP_FILE_OPS else _FTP_ERR_FAIL])
+        header = _FTP_HEADER.pack((seq + 1) & 0xFFFF, session, reply, size, opcode, 0, 0, 0)
+        data = (header + error).ljust(251, b"\x00")
+        self.conn.mav.file_transfer_protocol_send(0, msg.get_srcSystem(), msg.get_srcComponent(), list(data))
+
     def _on_mission_request_list(self, msg: Any, now: float) -> None:
         if msg.target_system in (0, self.sysid):  # no missions in the simulator: an empty list
             self.conn.mav.mission_count_send(msg.get_srcSystem(), msg.get_srcComponent(), 0,
@@ -585,7 +608,16 @@ _HANDLERS: dict[str, Callable[[ArduSubSim, Any, float], None]] = {
     "PARAM_SET": ArduSubSim._on_param_set,
     "MISSION_REQUEST_LIST": ArduSubSim._on_mission_request_list,
     "REQUEST_DATA_STREAM": ArduSubSim._on_request_data_stream,
+    "FILE_TRANSFER_PROTOCOL": ArduSubSim._on_file_transfer,
 }
+
+# MAVLink FTP (FILE_TRANSFER_PROTOCOL.payload): header seq, session, opcode, size, req_opcode,
+# burst_complete, padding, offset; the opcodes and errors the simulator answers with
+_FTP_HEADER = struct.Struct("<HBBBBBBI")
+_FTP_TERMINATE_SESSION, _FTP_RESET_SESSIONS = 1, 2
+_FTP_FILE_OPS = (3, 4, 14)  # ListDirectory, OpenFileRO, CalcFileCRC32
+_FTP_ACK, _FTP_NAK = 128, 129
+_FTP_ERR_FAIL, _FTP_ERR_FILE_NOT_FOUND = 1, 10
 
 # telemetry stream -> the MAVLink message it sends
 _STREAM_MESSAGE = {"heartbeat": "HEARTBEAT", "attitude": "ATTITUDE", "pressure": "SCALED_PRESSURE2",
