@@ -202,8 +202,7 @@ def test_a_stale_stamp_removes_rovlabs_cache_files_and_nothing_else(tmp_path, mo
 
 
 # Modules that kernel modules import from but numba never compiles (design code, file readers, the
-# design summaries,
-# the decorator itself): their edits cannot change a compiled kernel.
+# design summaries, the decorator itself): their edits cannot change a compiled kernel.
 PYTHON_ONLY = {"_jit.py", "allocation/geometry.py", "control/lqr.py", "estimation/filtering.py", "estimation/model.py",
                "estimation/streaming.py", "models/discretise.py", "params/design.py", "params/validate.py",
                "params/vehicle.py", "core/summary.py"}
