@@ -80,7 +80,8 @@ def add_bridge_arguments(p: argparse.ArgumentParser, *, connect_default: str = "
                    help="filter/controller configuration name or TOML file (default bluerov2_heavy)")
     p.add_argument("--target-system", type=int, default=1, help="the vehicle's MAVLink system id (default 1)")
     p.add_argument("--sysid", type=int, default=255,
-                   help="the bridge's MAVLink system id; must equal the vehicle's SYSID_MYGCS (default 255)")
+                   help="the bridge's MAVLink system id; must be the vehicle's ground station id, MAV_GCS_SYSID "
+                        "(SYSID_MYGCS before ArduSub 4.7; default 255)")
     p.add_argument("--command", choices=("manual_control", "rc_override"), default="manual_control",
                    help="how to command ArduSub: MANUAL_CONTROL (default) or RC_CHANNELS_OVERRIDE")
     p.add_argument("--command-hz", type=float, default=None, help="command rate [Hz] (default: the control rate)")

@@ -4,7 +4,8 @@
   Depth of the sensor z = (p_abs - p_surface) / (rho g), positive down.
 * Angles: ATTITUDE is already in rad and rad/s; VFR_HUD.heading is whole degrees 0..359.
 * Joystick: MANUAL_CONTROL x, y, r in -1000..1000 and z in 0..1000 (500 = neutral). ArduSub turns
-  them into RC channel pulses with its joystick gain (JS_GAIN_DEFAULT) and throttle gain
+  them into RC channel pulses with its live pilot gain (JS_GAIN_DEFAULT at boot, then as the gain
+  buttons set it; reported as NAMED_VALUE_FLOAT "PilotGain") and throttle gain
   (JS_THR_GAIN): 1500 + 0.4 gain x for forward, lateral and yaw, 1500 + 0.8 gain thr_gain (z - 500)
   for throttle, each clipped to 1100..1900, and reads a channel as (pulse - 1500) / 400 in [-1, 1]
   (ArduPilot ArduSub/joystick.cpp, transform_manual_control_to_rc_override). So a normalised
