@@ -130,3 +130,40 @@ def test_command_line_bridge_stops_cleanly_and_keeps_its_recording(tmp_path):
         assert summary is not None
         topics = {c.topic for c in summary.channels.values()}
     assert {"/mavlink/HEARTBEAT", "/mavlink/SCALED_PRESSURE2", "/rovlab/estimate", "/rovlab/command"} <= topics
+
+
+def test_a_vehicle_file_that_disagrees_with_the_vehicles_parameters_stops_the_bridge_before_it_commands(tmp_path):
+    """Issue 27: the bridge reads FRAME_CONFIG, MOT_n_DIRECTION and the PWM range from the vehicle
+    (the simulator reports what its own vehicle file implies) and compares them with its vehicle
+    file: thruster T3 reversed in the bridge's file -> MOT_3_DIRECTION disagrees -> nothing armed,
+    nothing commanded, exit code 2, the parameter named. --trust-vehicle-file overrides."""
+    from rovlab.interfaces.mavlink.bridge import MavlinkBridge
+    from rovlab.params.design import load_design_config
+    from rovlab.params.edit import edit_vehicle_file
+    from rovlab.params.vehicle import load_vehicle, packaged_vehicle_path
+
+    mine = tmp_path / "reversed_t3.toml"
+    heavy = load_vehicle("bluerov2_heavy")
+    t3 = next(t for t in heavy.thrusters if t.name == "T3")
+    edit_vehicle_file(packaged_vehicle_path("bluerov2_heavy"),
+                      {"thrusters[name=T3].direction": [-float(v) + 0.0 for v in t3.direction]}, output=mine)
+    port = free_udp_port()
+    lines: list[str] = []
+    bridge = MavlinkBridge(load_vehicle(mine), load_design_config("bluerov2_heavy"), connect=f"udpin:127.0.0.1:{port}",
+                           log=lines.append, arm=True)
+    bridge.set_reference(z=1.5, psi=0.0)
+    sim = start_rovlab("mavlink", "sim", "--connect", f"udpout:127.0.0.1:{port}", "--duration", "120")
+    thread = threading.Thread(target=bridge.run, daemon=True)
+    thread.start()
+    try:
+        thread.join(120.0)
+        assert not thread.is_alive(), lines  # it stopped by itself
+        assert bridge.exit_code == 2 and bridge.vehicle_problems
+        text = "\n".join(lines)
+        assert "MOT_3_DIRECTION = -1: expected +1" in text and "MOT_1_DIRECTION" not in text, text
+        assert all(neutral for _t, _v, neutral in bridge.sent)  # only the neutral inputs of its exit
+        assert not bridge.armed and not bridge._armed_by_us
+    finally:
+        bridge.stop()
+        thread.join(10.0)
+        stop(sim)

@@ -136,7 +136,8 @@ def test_mavproxy_connects_cleanly_to_the_simulator(tmp_path):
     assert BANNER in out.splitlines()
     count = int(re.search(r"Received (\d+) parameters", out).group(1))
     parm = dict(line.split()[:2] for line in (tmp_path / "mav.parm").read_text().splitlines() if line.strip())
-    assert count == len(parm) == 15
+    assert count == len(parm) == 23  # 15 of ArduSub's and MOT_1..8_DIRECTION of the Heavy's vehicle file
+    assert [int(float(parm[f"MOT_{k}_DIRECTION"])) for k in range(1, 9)] == [-1] * 8
     assert float(parm["FS_PILOT_INPUT"]) == 2 and float(parm["MAV_GCS_SYSID"]) == 255 and "SYSID_MYGCS" not in parm
     msgs = tlog_messages(tmp_path / "mav.tlog")
     asked = [m for m in msgs if m.get_type() == "COMMAND_LONG" and m.command == 410]

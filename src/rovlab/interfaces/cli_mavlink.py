@@ -89,6 +89,9 @@ def add_bridge_arguments(p: argparse.ArgumentParser, *, connect_default: str = "
                    help="seconds without telemetry before neutral commands are sent (default 0.5)")
     p.add_argument("--arm", action="store_true", help="set MANUAL mode and arm the vehicle (disarm on exit)")
     p.add_argument("--record", default=None, help="record telemetry and rovlab's messages to this MCAP file")
+    p.add_argument("--trust-vehicle-file", action="store_true",
+                   help="command even when the vehicle's own parameters (frame, MOT_n_DIRECTION, PWM range) disagree "
+                        "with the vehicle file (default: stop before commanding anything, exit 2)")
 
 
 def make_bridge(args: argparse.Namespace, log: Any) -> Any:
@@ -109,7 +112,8 @@ def make_bridge(args: argparse.Namespace, log: Any) -> Any:
 
         return MavlinkBridge(vehicle, config, connect=args.connect, target_system=args.target_system,
                              sysid=args.sysid, command=args.command, command_hz=args.command_hz,
-                             telemetry_timeout_s=args.telemetry_timeout, arm=args.arm, record=args.record, log=log)
+                             telemetry_timeout_s=args.telemetry_timeout, arm=args.arm, record=args.record, log=log,
+                             trust_vehicle_file=getattr(args, "trust_vehicle_file", False))
     except MavlinkMissing as exc:
         raise UserError(str(exc)) from None
     except ValueError as exc:
@@ -345,4 +349,4 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
     print(f"rovlab mavlink bridge: stopped ({c['received']} messages in, {c['commands']} commands out, "
           f"{c['failsafes']} telemetry failsafes)" + (f"; recording: {args.record}" if args.record else ""),
           file=sys.stderr, flush=True)
-    return 0
+    return bridge.exit_code  # 2: the vehicle file disagreed with the vehicle's parameters (said above)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 # ArduSub flight modes (HEARTBEAT.custom_mode; ArduSub/mode.h, Mode::Number)
 MODES = {"STABILIZE": 0, "ACRO": 1, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "CIRCLE": 7, "SURFACE": 9,
@@ -121,6 +122,21 @@ def stepped_gain(gain: float, up: bool, *, gain_default: float, gain_min: float,
         return min(max(gain_default, gain_min), gain_max)
     delta = (gain_max - gain_min) / (steps - 1)
     return min(max(gain + (delta if up else -delta), gain_min), gain_max)
+
+
+def motor_directions(vehicle: Any, frame: int) -> tuple[ParamSpec, ...]:
+    """MOT_n_DIRECTION of a simulated vehicle: what its vehicle file implies for the frame
+    (rovlab.interfaces.mavlink.autopilot), so a bridge that checks them finds them in agreement;
+    none for a frame whose mixing rovlab does not know. Read-only: the simulated thrusters push as
+    the vehicle file says."""
+    from rovlab.interfaces.mavlink.autopilot import FRAMES, implied_directions
+
+    if frame not in FRAMES or len(FRAMES[frame][1]) != len(vehicle.thrusters):
+        return ()
+    dirs = implied_directions(vehicle, frame).directions
+    return tuple(ParamSpec(f"MOT_{k + 1}_DIRECTION", d if d else 1, -1, 1, PARAM_INT8, read_only=True,
+                           doc=f"motor {k + 1} reversed (-1) or not (1), as the vehicle file implies")
+                 for k, d in enumerate(dirs))
 
 
 class Parameters:

@@ -20,7 +20,8 @@ oriented as the factor table says, and the file *implies* MOT_n_DIRECTION = sign
   PARM) through pymavlink;
 * :func:`check_vehicle` compares a vehicle file with an autopilot's parameters: frame and
   motor count, each MOT_n_DIRECTION against the one the file implies, the PWM range; every
-  disagreement named (parameter, its value, the vehicle file's);
+  disagreement named (parameter, its value, the vehicle file's). A frame whose mixing rovlab
+  does not know (FRAME_CONFIG 0 BlueROV1, 3-7) is not checked;
 * :func:`vehicle_edits` gives the edits that make a vehicle file agree with the parameters
   (``rovlab vehicle from-ardusub``).
 
@@ -126,8 +127,7 @@ def check_vehicle(vehicle: Vehicle, params: Mapping[str, float], *, source: str,
     if frame_raw is not None:
         frame = int(frame_raw)
         if frame not in FRAMES:
-            known = ", ".join(f"{k} ({v[0]})" for k, v in FRAMES.items())
-            out.append(Problem(source, "FRAME_CONFIG", frame, f"a frame rovlab knows the mixing of: {known}"))
+            pass  # a frame whose mixing rovlab does not know (e.g. 7 CUSTOM): nothing to check it against
         elif len(FRAMES[frame][1]) != n:
             k = len(FRAMES[frame][1])
             out.append(Problem(source, "FRAME_CONFIG", frame,

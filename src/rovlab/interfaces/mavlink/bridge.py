@@ -79,7 +79,7 @@ class MavlinkBridge:
                  target_system: int = 1, sysid: int = 255, compid: int = 191, command: str = "manual_control",
                  command_hz: float | None = None, max_input_rate: float = 4.0, telemetry_timeout_s: float = 0.5,
                  arm: bool = False, record: str | None = None, log: Callable[[str], None] | None = None,
-                 core: NodeCore | None = None) -> None:
+                 core: NodeCore | None = None, trust_vehicle_file: bool = False) -> None:
         if command not in COMMAND_MODES:
             raise ValueError(f"command must be one of {', '.join(COMMAND_MODES)}, got {command!r}")
         for name, v, lo, hi in (("telemetry_timeout_s", telemetry_timeout_s, 0.05, 10.0),
@@ -87,6 +87,7 @@ class MavlinkBridge:
             if not (math.isfinite(v) and lo <= v <= hi):
                 raise ValueError(f"{name} must be within {lo:g} .. {hi:g}, got {v!r}")
         self.log = log or (lambda text: None)
+        self.vehicle = vehicle
         self.core = core if core is not None else NodeCore(vehicle, config, log=self.log)
         rate = 1.0 / self.core.h if command_hz is None else float(command_hz)
         if not (math.isfinite(rate) and 1.0 <= rate <= 50.0):
@@ -111,7 +112,14 @@ class MavlinkBridge:
         self.params: dict[str, float] = {"JS_GAIN_DEFAULT": 0.5, "JS_THR_GAIN": 1.0}  # ArduSub's defaults
         self.confirmed: set[str] = set()  # what the vehicle has reported (the keys of _PARAMS_WANTED, PilotGain)
         self.param_names: dict[str, str] = {}  # key of _PARAMS_WANTED -> the name the vehicle has
-        self._wanted = dict(_PARAMS_WANTED)
+        # the vehicle as its autopilot describes it (frame, thruster directions, PWM range), checked
+        # against the vehicle file before anything is commanded (rovlab.interfaces.mavlink.autopilot)
+        self.trust_vehicle_file = bool(trust_vehicle_file)
+        self._vehicle_keys = ("FRAME_CONFIG", "MOT_PWM_MIN", "MOT_PWM_MAX",
+                              *(f"MOT_{k + 1}_DIRECTION" for k in range(len(vehicle.thrusters))))
+        self.vehicle_problems: list[Any] | None = None  # None until checked; [] when the file agrees
+        self.exit_code = 0
+        self._wanted = {**_PARAMS_WANTED, **{k: (k,) for k in self._vehicle_keys}}
         self._param_asks: dict[str, int] = dict.fromkeys(self._wanted, 0)
         self.live_gain: float | None = None  # NAMED_VALUE_FLOAT PilotGain
         self.vehicle_seen = False
@@ -206,7 +214,10 @@ class MavlinkBridge:
                 for topic, _t, m in msgs:
                     self.recorder.rovlab(topic, wall, m)
         self._housekeeping(now)
-        if self.core.engaged and self.vehicle_seen and now >= self._due["command"] and self._gains_known(now):
+        if self.vehicle_problems is None and self.vehicle_seen:
+            self._check_vehicle_file(now)
+        if self.core.engaged and self.vehicle_seen and self.vehicle_problems == [] and now >= self._due["command"] \
+                and self._gains_known(now):
             self._due["command"] = max(self._due["command"] + self.command_period, now)
             self._command(now)
 
@@ -343,7 +354,7 @@ class MavlinkBridge:
         elif now >= self._due["rates"]:
             self._due["rates"] = now + 0.5
             self._check_rates(now)
-        if self.want_arm and not self.armed and now >= self._due["arm"]:
+        if self.want_arm and not self.armed and self.vehicle_problems == [] and now >= self._due["arm"]:
             self._due["arm"] = now + 1.0
             if self.mode != MODES["MANUAL"]:
                 out.command_long_send(self.target_system, 1, mav.MAV_CMD_DO_SET_MODE, 0,
@@ -361,7 +372,8 @@ class MavlinkBridge:
                 continue
             if self._param_asks[key] >= _PARAM_TRIES:
                 self._warn_once(f"param-{key}", f"the vehicle did not report {' or '.join(names)} after "
-                                                f"{_PARAM_TRIES} requests: {_MISSING[key]}")
+                                                f"{_PARAM_TRIES} requests: "
+                                                f"{_MISSING.get(key, 'this thruster direction cannot be checked')}")
                 continue
             self._param_asks[key] += 1
             for name in names:
@@ -413,6 +425,35 @@ class MavlinkBridge:
                     continue
             self._rate_asks[name] = asks + 1
             self._ask_rate(name, now)
+
+    def _check_vehicle_file(self, now: float) -> None:
+        """Once the vehicle reported its frame and thruster parameters (or did not within
+        _PARAM_TRIES requests): compare them with the vehicle file. A disagreement stops the bridge
+        before it commands anything (exit_code 2, each parameter named), unless trust_vehicle_file."""
+        from rovlab.interfaces.mavlink.autopilot import TRUST_HINT, check_vehicle
+
+        pending = [k for k in self._vehicle_keys if k not in self.confirmed and self._param_asks[k] < _PARAM_TRIES]
+        if pending:
+            return
+        params = {k: self.params[k] for k in self._vehicle_keys if k in self.confirmed}
+        problems = check_vehicle(self.vehicle, params, source=f"{self.connect} (system {self.target_system})")
+        missing = [k for k in self._vehicle_keys if k not in self.confirmed]
+        if missing:
+            self.log(f"the vehicle did not report {', '.join(missing)}: the vehicle file's thrusters are not checked "
+                     "against them")
+        if problems and not self.trust_vehicle_file:
+            self.vehicle_problems = problems
+            self.log(f"the vehicle file {self.vehicle.name} disagrees with the vehicle's autopilot; nothing is commanded "
+                     f"(rovlab vehicle from-ardusub --connect URL --base {self.vehicle.name} --out V.toml writes one "
+                     f"that agrees; {TRUST_HINT}):")
+            for pr in problems:
+                self.log(f"  {pr.key} = {pr.value}: expected {pr.expected}")
+            self.exit_code = 2
+            self.stop()
+            return
+        if problems:
+            self.log(f"--trust-vehicle-file: {len(problems)} disagreement(s) with the vehicle's parameters ignored")
+        self.vehicle_problems = []
 
     def _gains_known(self, now: float) -> bool:
         """MANUAL_CONTROL is scaled by the live pilot gain and JS_THR_GAIN: wait for them (5 s at
@@ -485,4 +526,7 @@ _MISSING = {
     "BARO2_GND_PRESS": "depth is measured from 1013.25 hPa",
     "GCS_SYSID": "cannot check that the vehicle obeys the bridge's system id",
     "GCS_SYSID_HI": "assuming no range of ground station ids",
+    "FRAME_CONFIG": "the frame (and so the thruster directions) cannot be checked",
+    "MOT_PWM_MIN": "the PWM range cannot be checked",
+    "MOT_PWM_MAX": "the PWM range cannot be checked",
 }

@@ -73,6 +73,7 @@ from rovlab.interfaces.mavlink.ardusub import (
     THIS_MAV,
     Parameters,
     boot_gain,
+    motor_directions,
     sim_parameters,
     stepped_gain,
 )
@@ -123,8 +124,10 @@ class ArduSubSim:
         pwm_min = min(t.pwm_min_us for t in vehicle.thrusters)
         pwm_max = max(t.pwm_max_us for t in vehicle.thrusters)
         self.firmware = firmware
-        self.params = Parameters(sim_parameters(firmware), BARO_SPEC_GRAV=vehicle.water_density / 1000.0,
-                                 MOT_PWM_MIN=pwm_min, MOT_PWM_MAX=pwm_max, FRAME_CONFIG=2 if n == 8 else 7)
+        frame = 2 if n == 8 else 7  # VECTORED_6DOF (the Heavy), else CUSTOM
+        self.params = Parameters(sim_parameters(firmware) + motor_directions(vehicle, frame),
+                                 BARO_SPEC_GRAV=vehicle.water_density / 1000.0, MOT_PWM_MIN=pwm_min,
+                                 MOT_PWM_MAX=pwm_max, FRAME_CONFIG=frame)
         self.my_gcs = MY_GCS[firmware]  # the parameter naming the ground station
         self.sysid = int(self.params[THIS_MAV[firmware]])
         p = self.params
