@@ -58,7 +58,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from rovlab._jit import njit
+from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
     NAV_BN,
@@ -134,7 +134,7 @@ class DP(NamedTuple):
     state: np.ndarray  # (21): see STATE_NAMES
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def reference_model_step(eta, vel, acc, r, omega, zeta, v_max, h, n_sub):
     """Advance one axis of the third-order reference model over h (n_sub Euler substeps, in place
     on the 1-element views eta, vel, acc) toward the set-point r, speed limited to v_max."""
@@ -161,7 +161,7 @@ def _damping(ctrl, i, v):
     return (ctrl.D[i] + ctrl.Dq[i] * abs(v) + ctrl.Dc[i] * v * v) * v
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _dp_step(ctrl, t, nav, ref, tau):
     s = ctrl.state
     psi = nav[NAV_PSI]
@@ -208,7 +208,7 @@ def _dp_step(ctrl, t, nav, ref, tau):
     s[_ETA + 3] = wrap_angle(s[_ETA + 3])
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _dp_actuated(ctrl, t, tau_demanded, tau_achieved):
     s = ctrl.state
     # the shortfall of the allocation (body) in NED, for the back-calculation

@@ -29,7 +29,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from rovlab._jit import njit
+from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.control.lqr import LQRDesign, design_lqr_from_config
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
@@ -51,7 +51,7 @@ from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def lqg_tau(K, P, x_hat, ref, tau):
     psi_eq = ref[1] - wrap_angle(ref[1] - x_hat[1])
     for i in range(2):
@@ -96,7 +96,7 @@ class LQG(NamedTuple):
 _FROM_NAV = (NAV_Z, NAV_PSI, NAV_W, NAV_R, NAV_BZ, NAV_BN)
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _lqg_step(ctrl, t, nav, ref, tau):
     for i in range(6):
         ctrl.x6[i] = nav[_FROM_NAV[i]]

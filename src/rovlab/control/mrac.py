@@ -61,7 +61,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from rovlab._jit import njit
+from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.control.lqg import lqg_tau, lqr_lines, lqr_summary
 from rovlab.control.lqr import LQRDesign, design_lqr_from_config
 from rovlab.core.components import (
@@ -186,7 +186,7 @@ class MRAC(NamedTuple):
 _FROM_NAV = (NAV_Z, NAV_PSI, NAV_W, NAV_R, NAV_BZ, NAV_BN)
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _mrac_step(ctrl, t, nav, ref, tau):
     st = ctrl.state
     z = nav[NAV_Z]
@@ -212,7 +212,7 @@ def _mrac_step(ctrl, t, nav, ref, tau):
     tau[3] = ctrl.u2[1]
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _mrac_actuated(ctrl, t, tau_demanded, tau_achieved):
     st = ctrl.state
     adapt(st, ctrl.Y, ctrl.mem[1], ctrl.gamma, ctrl.sigma, ctrl.theta0, ctrl.lo, ctrl.hi, ctrl.h)

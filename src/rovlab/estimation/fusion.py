@@ -145,7 +145,7 @@ import math
 
 import numpy as np
 
-from rovlab._jit import njit
+from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.core.angles import wrap_angle  # noqa: F401  (re-exported for the filter kernels)
 from rovlab.estimation.layout import (  # noqa: F401  (re-exported: the layout and codes live there)
     CFG_ANGLE,
@@ -249,7 +249,7 @@ def _plausible(rep, cfg, j):
     return nu * nu <= cfg[j, CFG_GATE] * (rep[j, REP_S] + (_CONSENSUS_WIDENING - 1.0) * cfg[j, CFG_R])
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _agrees_with_another(rep, cfg, value, j, m):
     """Consensus: another pending channel of the same state also fails the prior gate, and its
     (offset-corrected) sample agrees with channel j's within the gate (chi-square on the
@@ -272,7 +272,7 @@ def _agrees_with_another(rep, cfg, value, j, m):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _witnessed(rep, cfg, value, j, m):
     """Another channel of the same state refutes channel j's sample at this step: its own sample
     passes the gate (it agrees with the prediction) and disagrees with channel j's beyond the gate
@@ -324,7 +324,7 @@ def _stuck_check(ch, cfg, j, v):
     return 1 if scatter < cfg[j, CFG_STUCK_BOUND] * cfg[j, CFG_R] else 0
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _inflate(P, H, cfg, j, nu, s):
     """The prediction of channel j's quantity was found wrong (a jump the model missed): widen its
     variance so that this innovation is a 1-sigma event, h P h^T + R = nu^2. For a unit row h = e_i
@@ -378,7 +378,7 @@ def _weight(ch, cfg, j, status, t):
     return 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def manage_channels(x, P, ch, H, cfg, t, y, present, rep, value) -> int:
     """Decide which samples of this step are used; update ``ch`` and ``rep`` in place.
 

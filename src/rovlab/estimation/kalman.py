@@ -69,7 +69,7 @@ import math
 import numpy as np
 from numpy.lib.stride_tricks import as_strided
 
-from rovlab._jit import njit
+from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.estimation.fusion import (
     CFG_ANGLE,
     CFG_R,
@@ -177,7 +177,7 @@ def kf_workspace(n: int, m: int) -> np.ndarray:
     return np.empty(work_size(n, m))
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def predict_arrays(x, P, Delta, Q, wrap, sp, u, work, kappa):
     """kf_predict on unpacked model arrays (for loops that unpack once).
 
@@ -319,7 +319,7 @@ def kf_update_scalar(x, P, h, value, r, angle, wrap, work):
     _update_row(x, P, H, 0, idx, value, r, r, angle, wrap, work)
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def correct_arrays(x, P, ch, H, cfg, wrap, t, y, present, rep, work):
     """kf_correct on unpacked model arrays (for loops that unpack once)."""
     m = H.shape[0]

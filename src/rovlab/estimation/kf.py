@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from rovlab._jit import njit, plain
+from rovlab._jit import WITHOUT_NRT, njit, plain
 from rovlab.core.components import ComponentInfo, EstimatorSpec, register_component, register_estimator
 from rovlab.core.summary import render
 from rovlab.estimation.fusion import new_channel_state
@@ -45,12 +45,12 @@ class KalmanFilter(NamedTuple):
     kappa: np.ndarray  # (p) relative uncertainty of each input (the thrusters' wrench)
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _correct(est, t, y, present, rep):
     correct_arrays(est.x, est.P, est.ch, est.H, est.cfg, est.wrap, t, y, present, rep, est.work)
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _predict(est, t, tau):
     for i in range(est.inputs.shape[0]):
         est.u[i] = tau[est.inputs[i]]

@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rovlab._jit import njit
+from rovlab._jit import WITHOUT_NRT, njit
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import NAV_BN, NAV_BX, NAV_BY, NAV_BZ, NAV_PSI, NAV_R, NAV_W, NAV_Z, register_plant
 from rovlab.models.kinetics import P_BUOY, P_WEIGHT, rk4_scalars, submerged
@@ -79,7 +79,7 @@ def _process_truth(plant, truth):
     truth[NAV_BN] = plant.bias[3]
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def process_advance(p, x, tau_b, h, noise_std, normals):
     """Advance the process plant over len(normals) RK4 steps of length h (in place).
 
@@ -144,7 +144,7 @@ def _linear_steps(Phi, Delta, L, x, u, normals, tmp, m, p):
             x[i] = tmp[i]
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def linear_advance(Phi, Delta, L, x, u, normals, tmp):
     """Advance x <- Phi x + Delta u + L n over len(normals) exact steps (in place).
 
@@ -156,7 +156,7 @@ def linear_advance(Phi, Delta, L, x, u, normals, tmp):
         _linear_steps(Phi, Delta, L, x, u, normals, tmp, x.shape[0], u.shape[0])
 
 
-@njit(cache=True)
+@njit(cache=True, **WITHOUT_NRT)  # called by the loop: compiled alike whoever calls it first
 def _observer_step(plant, drive, row, tau_cmd, tau_real):
     n = plant.n_sub
     u = plant.u
