@@ -213,3 +213,37 @@ def test_fuzz_filter_logs_small_budget(capsys, tmp_path):
 def test_fuzz_filter_logs_long(capsys, tmp_path):
     _fuzz(capsys, tmp_path, n=3000, seed=15)
 
+
+
+def test_every_sample_is_used_at_any_rate_and_jittered_times_are_fused_at_their_period(capsys, tmp_path):
+    """Issue 27: channels at 20 Hz with the filter at 10 Hz (two samples a period), one at 10 Hz, and
+    time stamps jittered by up to 40 % of h: every sample is fused, at the filter period nearest its
+    time (several in one period one after another), none dropped, none refused."""
+    rng = np.random.default_rng(27)
+    t = np.arange(0.0, 30.0, 0.05) + rng.uniform(-0.02, 0.02, 600)  # 20 Hz, jittered
+    t[0] = 0.0
+    rows = []
+    for k, tk in enumerate(t):
+        # noise within the default configuration's variances (motion capture 4.5e-5 m, 1.3e-3 rad; pressure 1.1 cm)
+        zq = f"{1.0 + 2e-5 * rng.standard_normal():.7f}"
+        zp = f"{0.9535 + 0.005 * rng.standard_normal():.6f}" if k % 2 == 0 else ""  # 10 Hz; lever arm -0.0465 m
+        psi = f"{0.5 + 5e-4 * rng.standard_normal():.6f}"
+        rows.append(f"{tk:.6f},0,0,{zq},{zp},{psi}")
+    path = _write(tmp_path / "fast.csv", rows)
+    code, out, err = run(capsys, "filter", str(path), "--out", str(tmp_path / "est.csv"))
+    assert code == 0, err
+    assert "qualisys.z       600 samples, 600 used" in out and "pressure.z       300 samples, 300 used" in out
+    assert "qualisys.psi     600 samples, 600 used" in out
+    est = read_log(tmp_path / "est.csv")
+    np.testing.assert_array_equal(est.time, np.round(t, 6))  # one estimate per row, at the row's time
+    assert abs(est["est_z"][-1] - 1.0) < 0.02
+
+
+def test_rows_of_one_period_are_fused_one_after_another_without_a_prediction_between():
+    from rovlab.estimation.streaming import period_steps
+
+    n, restart, bad = period_steps(np.array([0.0, 0.04, 0.1, 0.16, 0.33, 2.0]), 0.1, 0.0, max_steps=10)
+    assert n.tolist() == [0, 1, 1, 1, 0] and restart.tolist() == [False, False, False, False, True] and bad is None
+    # the grid is the log's: 0.33 s lies in period 3, 2.0 s in period 20 (17 periods later: a restart)
+    n, restart, bad = period_steps(np.array([0.0, np.nan]), 0.1, 0.0)
+    assert bad == 0

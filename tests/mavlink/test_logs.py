@@ -42,22 +42,24 @@ def test_filter_columns_on_synthetic_telemetry(heavy):
     recs = [(t0 - 5.0, "HEARTBEAT", {"type": 6, "_sysid": 255}),  # the ground station's: ignored
             (t0, "HEARTBEAT", {"type": 12, "_sysid": 1}),
             (t0 + 0.00, "SCALED_PRESSURE2", {"press_abs": _pressure(1.0), "_sysid": 1}),
-            (t0 + 0.04, "SCALED_PRESSURE2", {"press_abs": _pressure(1.1), "_sysid": 1}),  # same period: latest wins
+            (t0 + 0.04, "SCALED_PRESSURE2", {"press_abs": _pressure(1.1), "_sysid": 1}),  # same period: kept too
             (t0 + 0.10, "ATTITUDE", {"yaw": 0.5, "yawspeed": 0.01, "roll": 0.0, "pitch": 0.0, "_sysid": 1}),
             (t0 + 0.20, "SERVO_OUTPUT_RAW", {**{f"servo{i}_raw": 1500 for i in range(1, 5)},
                                              **{f"servo{i}_raw": 1700 for i in range(5, 9)}, "_sysid": 1}),
-            (t0 + 0.30, "SCALED_PRESSURE2", {"press_abs": float("nan"), "_sysid": 1}),  # no sample
+            (t0 + 0.30, "SCALED_PRESSURE2", {"press_abs": float("nan"), "_sysid": 1}),  # no sample: no row
             (t0 + 0.50, "SCALED_PRESSURE2", {"press_abs": _pressure(0.9), "_sysid": 1})]
     cols = filter_columns(recs, v, tuple(model.channels), 0.1)
-    np.testing.assert_allclose(cols["time_s"], np.arange(6) * 0.1)
+    # a row at each time the vehicle sent something the filter uses: every sample, at its own time
+    np.testing.assert_allclose(cols["time_s"], [0.0, 0.04, 0.10, 0.20, 0.50])
     z = cols["z_bar30"]
-    assert z[0] == pytest.approx(1.1) and z[5] == pytest.approx(0.9)
-    assert np.isnan(z[1:5]).all()
-    assert cols["psi_imu"][1] == pytest.approx(0.5) and cols["r_imu"][1] == pytest.approx(0.01)
-    # vertical thrusters at 1700 us push up: Z < 0 from row 2 on, held; zero before the first SERVO_OUTPUT_RAW
-    assert cols["tau_Z"][0] == 0.0 and cols["tau_Z"][1] == 0.0
-    assert cols["tau_Z"][2] < -10.0 and np.all(cols["tau_Z"][2:] == cols["tau_Z"][2])
-    assert np.all(np.abs(cols["tau_N"]) < 1e-9)
+    assert z[0] == pytest.approx(1.0) and z[1] == pytest.approx(1.1) and z[4] == pytest.approx(0.9)
+    assert np.isnan(z[2:4]).all()
+    assert cols["psi_imu"][2] == pytest.approx(0.5) and cols["r_imu"][2] == pytest.approx(0.01)
+    # vertical thrusters at 1700 us push up: Z < 0 from the SERVO_OUTPUT_RAW on, held; zero before it
+    assert np.all(cols["tau_Z"][:3] == 0.0)
+    assert cols["tau_Z"][3] < -10.0 and cols["tau_Z"][4] == cols["tau_Z"][3]
+    assert np.all(np.abs(cols["tau_N"]) < 1e-9) and np.all(np.abs(cols["tau_X"]) < 1e-9)
+    assert "tau_Y" in cols  # the whole wrench: the 4-DOF EKF replays a dive too
 
 
 def test_bad_logs_are_refused_clearly(heavy, tmp_path):

@@ -2,10 +2,14 @@
 
 :class:`StreamingFilter` drives a filter with the interface of
 rovlab.estimation.filtering.DepthHeadingFilter (``initial_belief``, ``run``; also
-rovlab.estimation.offline.ComponentFilter): it plans the projections between rows from their time
-stamps (:func:`plan_steps`), bridges gaps by prediction, restarts from the prior after a gap too
-long to bridge, treats absurd values as faulty samples and holds non-finite inputs
-(:func:`hold_last`).
+rovlab.estimation.offline.ComponentFilter): it puts each row on the filter's grid of sample
+times (:func:`period_steps`: the period nearest its time, counted from the log's first row),
+fuses the samples of several rows in one period one after another and predicts between periods,
+bridges gaps by prediction, restarts from the prior after a gap too long to bridge, treats absurd
+values as faulty samples and holds non-finite inputs (:func:`hold_last`). So every sample of a
+log is used whatever its rate: a 20 Hz heading at h = 0.1 s (two per period), a 2 Hz pressure
+(one every five), jittered time stamps. (:func:`plan_steps` is the stricter rule of the Python
+API's one-shot run, rovlab.estimation.filtering: a log on the grid, k h apart.)
 """
 
 from __future__ import annotations
@@ -87,6 +91,30 @@ def steps_between(t: np.ndarray, h: float, *, tolerance: float = 0.25) -> tuple[
     return n, None
 
 
+def period_steps(t: np.ndarray, h: float, t_ref: float, *, max_steps: int | None = MAX_GAP_STEPS
+                 ) -> tuple[np.ndarray, np.ndarray, int | None]:
+    """(predictions between consecutive rows, restart per interval, index of the first bad interval
+    or None) for rows at times ``t`` on the grid t_ref + k h: row i belongs to the period nearest
+    its time, and the predictions between two rows are the periods between theirs -- 0 for rows in
+    the same period (their samples are fused one after another), k for a gap of k periods. More
+    than ``max_steps``: a restart (the filter starts again from its prior after it); a time that is
+    not finite or a period earlier than the one before: bad. In floating point, so absurd times
+    (1e18 s) cannot overflow an integer."""
+    t = np.asarray(t, dtype=float)
+    with np.errstate(over="ignore", invalid="ignore"):
+        period = np.floor((t - t_ref) / h + 0.5)
+        k = np.diff(period)
+        restart = np.zeros(k.size, dtype=bool)
+        if max_steps is not None:
+            restart = ~(k <= max_steps) & (k > 0)  # includes an infinite interval
+        bad = ~restart & ((k < 0) | ~np.isfinite(k) | (k > 2.0 ** 53))
+    first = int(np.argmax(bad)) if bad.any() else None
+    n = np.zeros(k.size, dtype=np.int64)
+    ok = ~restart & ~bad
+    n[ok] = k[ok].astype(np.int64)
+    return n, restart, first
+
+
 class IntervalError(ValueError):
     """An interval between two samples that is no whole number of filter samples."""
 
@@ -123,6 +151,7 @@ class StreamingFilter:
         self.restarts = 0
         self.restart_rows: list[int] = []
         self.absurd = 0
+        self._t_ref: float | None = None  # the grid's origin: the log's first row
         self._pending: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._restart_next = False
         self._u_last = np.zeros(filt.p)
@@ -151,7 +180,9 @@ class StreamingFilter:
         if done == 0:
             return []
         # interval i lies between rows i and i + 1; the last row of a final chunk projects once
-        steps, gap, bad = plan_steps(np.diff(t), self.h, tolerance=self.tolerance, max_steps=self.max_gap_steps)
+        if self._t_ref is None:
+            self._t_ref = float(t[0])
+        steps, gap, bad = period_steps(t, self.h, self._t_ref, max_steps=self.max_gap_steps)
         if bad is not None:
             raise IntervalError(self.row + bad + 1, float(t[bad + 1] - t[bad]), self.h)
         n_predict = np.ones(done, dtype=np.int64)
@@ -178,5 +209,5 @@ class StreamingFilter:
         return runs
 
 
-__all__ = ("IntervalError", "MAX_ABS_SAMPLE", "MAX_GAP_STEPS", "StreamingFilter", "hold_last", "plan_steps",
-           "steps_between")
+__all__ = ("IntervalError", "MAX_ABS_SAMPLE", "MAX_GAP_STEPS", "StreamingFilter", "hold_last", "period_steps",
+           "plan_steps", "steps_between")

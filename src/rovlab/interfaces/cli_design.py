@@ -334,7 +334,8 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
         except IntervalError as exc:
             raise ConfigError([Problem(stream.file, stream.where(exc.row, "time_s"),
                                        f"a step of {exc.dt:.6g} s after line {stream.line_of(exc.row - 1)}",
-                                       f"a whole number of filter sample times h = {model.h:g} s (within 25%)")],
+                                       "finite times that increase (each row is fused at the filter period "
+                                       f"nearest its time, h = {model.h:g} s)")],
                               "log") from None
         except OSError as exc:
             raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None

@@ -268,49 +268,55 @@ def surface_pressure_hpa(records: Iterable[Record]) -> float | None:
 
 def filter_columns(records: list[Record], vehicle: Vehicle, channels: tuple[Any, ...], h: float, *,
                    surface_hpa: float | None = None, file: str = "<log>") -> dict[str, np.ndarray]:
-    """The columns ``rovlab filter`` reads (time_s, tau_Z, tau_N and one per channel) on a grid of
-    the filter's sample time h: each row holds the latest sample of each channel within its
-    period (NaN when none) and the thruster wrench held since the last SERVO_OUTPUT_RAW."""
+    """The columns ``rovlab filter`` reads (time_s, tau_X, tau_Y, tau_Z, tau_N and one per channel):
+    a row at each time the vehicle sent something the filter uses, holding the samples of that time
+    (NaN for the other channels) and the thruster wrench held since the last SERVO_OUTPUT_RAW. Every
+    sample is kept, at any rate: the filter fuses each row at the period of its sample time h
+    nearest its time, several rows of one period one after another (rovlab.estimation.streaming)."""
     sysid = vehicle_sysid(records)
     mine = [r for r in records if sysid is None or r[2].get("_sysid", sysid) == sysid]
     if surface_hpa is None:
         surface_hpa = surface_pressure_hpa(mine) or STANDARD_ATMOSPHERE_HPA
     smap = SampleMap(vehicle, channels, surface_hpa=surface_hpa)
-    times = [t for t, kind, _ in mine if kind in ("SCALED_PRESSURE2", "ATTITUDE", "SERVO_OUTPUT_RAW",
-                                                  "VISION_POSITION_ESTIMATE", "LOCAL_POSITION_NED")]
+    used_kinds = ("SCALED_PRESSURE2", "ATTITUDE", "SERVO_OUTPUT_RAW", "VISION_POSITION_ESTIMATE", "LOCAL_POSITION_NED")
+    times = [t for t, kind, _ in mine if kind in used_kinds]
     if not times:
         raise LogError(f"{file}: no telemetry the filter can use (SCALED_PRESSURE2, ATTITUDE, SERVO_OUTPUT_RAW, "
                        "VISION_POSITION_ESTIMATE, LOCAL_POSITION_NED)")
     t0 = min(times)
-    rows = int(math.floor((max(times) - t0) / h + 0.5)) + 1
-    cols: dict[str, np.ndarray] = {"time_s": np.arange(rows) * h, "tau_Z": np.full(rows, np.nan),
-                                   "tau_N": np.full(rows, np.nan)}
-    for c in channels:
-        cols[c.column] = np.full(rows, np.nan)
+    rows: dict[float, dict[str, float]] = {}  # time since t0 (to the microsecond) -> column -> value
+    tau_at: dict[float, np.ndarray] = {}
     used = 0
     for t, kind, f in sorted(mine, key=lambda r: r[0]):
-        if t < t0:
+        if t < t0 or kind not in used_kinds:
             continue
-        k = min(int(math.floor((t - t0) / h + 0.5)), rows - 1)
+        key = round(t - t0, 6)
         if kind == "SERVO_OUTPUT_RAW":
             tau = smap.wrench(f)
             if tau is not None:
-                cols["tau_Z"][k], cols["tau_N"][k] = tau[2], tau[3]
+                tau_at[key] = tau
+                rows.setdefault(key, {})
                 used += 1
             continue
-        for column, value in smap.samples(kind, f).items():
-            cols[column][k] = value
-            used += 1
+        got = smap.samples(kind, f)
+        if got:
+            rows.setdefault(key, {}).update(got)
+            used += len(got)
     if not used:
         raise LogError(f"{file}: none of its messages gives a sample of {', '.join(c.column for c in channels)}")
-    for key in ("tau_Z", "tau_N"):  # zero-order hold; no thrust before the first SERVO_OUTPUT_RAW
-        col = cols[key]
-        last = 0.0
-        for i in range(rows):
-            if math.isnan(col[i]):
-                col[i] = last
-            else:
-                last = col[i]
+    keys = sorted(rows)
+    n = len(keys)
+    cols: dict[str, np.ndarray] = {"time_s": np.array(keys, dtype=float)}
+    for c in channels:
+        cols[c.column] = np.array([rows[k].get(c.column, math.nan) for k in keys], dtype=float)
+    tau = np.zeros(4)  # zero-order hold; no thrust before the first SERVO_OUTPUT_RAW
+    wrench = np.zeros((n, 4))
+    for i, k in enumerate(keys):
+        if k in tau_at:
+            tau = tau_at[k]
+        wrench[i] = tau
+    for i, name in enumerate(("tau_X", "tau_Y", "tau_Z", "tau_N")):
+        cols[name] = wrench[:, i]
     return cols
 
 
@@ -325,7 +331,7 @@ def write_filter_log(log: str | Path, vehicle: Vehicle, model: Any, out: str | P
     cols = filter_columns(records, vehicle, tuple(model.channels), float(model.h), surface_hpa=surface_hpa,
                           file=str(log))
     write_csv(out, cols, comments=[f"converted from {log} by rovlab mavlink for vehicle {vehicle.name}",
-                                   "units: SI (s, m, rad, rad/s, N, N m); empty = no sample in that period"],
+                                   "units: SI (s, m, rad, rad/s, N, N m); empty = no sample at that time"],
               exact=("time_s",))
     return {"rows": int(cols["time_s"].size), "messages": len(records),
             "samples": {c.column: int(np.count_nonzero(~np.isnan(cols[c.column]))) for c in model.channels}}
