@@ -40,7 +40,8 @@ PY = sys.executable
 
 PEER = """
 import multiprocessing as mp, sys
-from rovlab.sim.runner import simulate, summarise
+from rovlab.sim.results import summarise
+from rovlab.sim.runner import simulate
 
 def one(seed):
     r = simulate(sys.argv[1], seed=seed)
