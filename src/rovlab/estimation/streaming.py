@@ -140,12 +140,10 @@ class StreamingFilter:
     * a non-finite input repeats the previous finite one (zero-order hold), across chunks.
     """
 
-    def __init__(self, filt: Any, *, max_gap_steps: int = MAX_GAP_STEPS,
-                 tolerance: float = 0.25) -> None:
+    def __init__(self, filt: Any, *, max_gap_steps: int = MAX_GAP_STEPS) -> None:
         self.filt = filt
         self.h = filt.model.h
         self.max_gap_steps = int(max_gap_steps)
-        self.tolerance = tolerance
         self.belief = filt.initial_belief()
         self.row = 0  # log index of the first row not returned yet
         self.restarts = 0

@@ -92,8 +92,8 @@ SIMULATED_MODES = (MODES["MANUAL"], MODES["STABILIZE"])
 _AXES = ("forward", "lateral", "throttle", "yaw")
 _ARM_FORCE_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2 that forces arming/disarming
 _MAX_CATCH_UP_S = 1.0  # real time the simulation catches up in one call; beyond it, it falls behind
-# telemetry stream -> (sensor kind, quantity) of the sample it carries
-_SOURCES = {"attitude": ("imu", "psi"), "pressure": ("pressure", "z")}
+# telemetry stream -> (sensor kind, quantities) of the samples it carries
+_SOURCES = {"attitude": ("imu", ("psi", "r")), "pressure": ("pressure", ("z",))}
 DEFAULT_HOME = (63.44, 10.40, 0.0)  # latitude, longitude [deg], altitude [m]: an arbitrary point in Trondheimsfjord
 _TEXT_LEN = 50  # STATUSTEXT.text
 _MAX_CHUNKS = 8  # a longer STATUSTEXT is cut after this many chunks
@@ -217,12 +217,10 @@ class ArduSubSim:
 
     def _take(self, s: VehicleSample) -> None:
         for sensor, quantity, value in s.samples:
-            for key, (kind, q) in _SOURCES.items():
-                if q == quantity and self.sim.sensor_kind(sensor) == kind:
-                    self.latest[key + "." + q] = (value, s.t)
-        r = next(((v, s.t) for sensor, q, v in s.samples if q == "r" and self.sim.sensor_kind(sensor) == "imu"), None)
-        if r is not None:
-            self.latest["attitude.r"] = r
+            kind = self.sim.sensor_kind(sensor)
+            for key, (k, quantities) in _SOURCES.items():
+                if k == kind and quantity in quantities:
+                    self.latest[key + "." + quantity] = (value, s.t)
 
     def _sample(self, key: str, quantity: str) -> float | None:
         """The latest sample a stream carries, None while its sensor is silent."""
