@@ -17,6 +17,22 @@ Marine Craft Hydrodynamics and Motion Control, sec. 8.3, Property 8.1), so
 with nu (over ground, what a bottom-locked DVL measures) kept as the state. With V_c = 0 every
 expression reduces to the one without current, bit for bit.
 
+Free surface: where the surface cuts the hull (|z| < h/2, h the hull's height) buoyancy and heave
+added mass scale with the submerged fraction s(z) (0 above the band, 1 below it, linear in
+between): net heave force W - s(z) B and heave mass m_w(z) = m - s(z) Z_wdot. A mass that depends
+on the position needs its own term in the equation of motion. With roll = pitch = 0 heave is
+w = z_dot, and Lagrange's equation (Goldstein, Poole & Safko 2002, Classical Mechanics, 3rd ed.,
+sec. 1.4) for T = 1/2 m_w(z) w^2 and V(z) = -W z + B int s dz (z down) reads
+
+    d/dt (m_w w) - 1/2 m_w'(z) w^2 + dV/dz = Z    =>    m_w w_dot + 1/2 m_w'(z) w^2 = W - s(z) B + Z
+
+(d/dt (m_w w) = m_w w_dot + m_w' w^2), so that d(T + V)/dt = Z w: without damping and thrust the
+energy is conserved through the breach (tests/models/test_free_surface_energy.py). m_w' = -Z_wdot / h
+> 0 in the band: a rising hull sheds added mass and is pushed up by 1/2 m_w' w^2 (without the
+term uDrone released from 1 m lost 1.9 J at the breach and stopped ~4 cm short). w is the
+relative heave velocity, like every hydrodynamic term (a vertical current at the surface is not
+physical; the packaged scenarios have none).
+
 The matrix builders below are plain numpy for reading and testing; the per-step
 paths (``nu_dot``, ``plant_rhs``, ``rk4_step``) run on a packed parameter vector (see
 :func:`pack`) in numba-compiled code.
@@ -159,6 +175,14 @@ def submerged(p, z):
 
 
 @njit(cache=True, inline="always")
+def heave_mass_slope(p, s_sub):
+    """dm_w/dz [kg/m] of the heave mass m_w(z) = m - s(z) Z_wdot at submerged fraction s_sub:
+    -Z_wdot / h inside the breach band (0 < s < 1, where s rises linearly over the hull's height
+    h), 0 outside it (fully submerged or clear of the water). Positive: deeper is heavier."""
+    return -p[P_ZWDOT] / (2.0 * p[P_HALF_H]) if 0.0 < s_sub < 1.0 else 0.0
+
+
+@njit(cache=True, inline="always")
 def rhs(p, x0, x1, x2, x3, x4, x5, x6, x7, f0, f1, f2, f3):
     """Time derivative of x = [eta; nu] (8, a tuple) for the total force f = tau + b (+ noise).
 
@@ -205,7 +229,9 @@ def rhs_cs(p, c, s, x2, x4, x5, x6, x7, f0, f1, f2, f3):
     if s_sub >= 1.0:  # submerged (almost always): 1 / (m - Z_wdot) is entry (2, 2) of M^-1, no division
         d6 = p[P_MINV + 10] * g2
     else:
-        d6 = g2 / (p[P_M] - s_sub * p[P_ZWDOT])
+        # breaching: the heave mass m_w(z) = m - s(z) Z_wdot depends on the depth, and Lagrange's
+        # equation of T = 1/2 m_w(z) w^2 gives m_w w_dot + 1/2 m_w'(z) w^2 = Z (module docstring)
+        d6 = (g2 - 0.5 * heave_mass_slope(p, s_sub) * x6 * x6) / (p[P_M] - s_sub * p[P_ZWDOT])
     if u_c != 0.0 or v_c != 0.0:  # nu_c_dot = d/dt R(psi)^T V_c = [r v_c, -r u_c, 0, 0]
         d4 += x7 * v_c
         d5 -= x7 * u_c
@@ -280,8 +306,10 @@ def jacobian_into(p, x, f, A):
         w = x[6] - p[P_VC + 2]
         g2 = -(s_sub * p[P_BUOY] - p[P_WEIGHT]) + (p[P_LIN + 2] + p[P_QUAD + 2] * abs(w)
                                                       + p[P_CUB + 2] * w * w) * w
-        # d/dz [(f_z + g2(z)) / m_w(z)], dg2/dz = -ds B, dm_w/dz = -ds Z_wdot
-        A[6, 2] = (-ds * p[P_BUOY]) / m_w + (f[2] + g2) * (ds * p[P_ZWDOT]) / (m_w * m_w)
+        k_m = heave_mass_slope(p, s_sub)  # dm_w/dz = -ds Z_wdot
+        # d/dz [(f_z + g2(z) - 1/2 k_m w^2) / m_w(z)], dg2/dz = -ds B
+        A[6, 2] = (-ds * p[P_BUOY]) / m_w - (f[2] + g2 - 0.5 * k_m * w * w) * k_m / (m_w * m_w)
+        A[6, 6] -= k_m * w / m_w  # d/dw of -1/2 k_m w^2 / m_w
 
 
 @njit(cache=True)
