@@ -134,7 +134,8 @@ def _cmd_filter(args: argparse.Namespace) -> int:
     filt, inputs, vehicle, config = _offline_filter(args)
     with tempfile.TemporaryDirectory(prefix="rovlab-filter-") as tmp:
         return _filter(args, vehicle, config, filt, inputs, _as_csv(args.log, vehicle, filt.model, Path(tmp),
-                                                                          trust=args.trust_vehicle_file))
+                                                                          trust=args.trust_vehicle_file,
+                                                                          max_gap_steps=args.max_gap_steps))
 
 
 def _offline_filter(args: argparse.Namespace):
@@ -164,7 +165,7 @@ def _offline_filter(args: argparse.Namespace):
     return ComponentFilter(info.build(vehicle, config)), WRENCH_COLUMNS, vehicle, config
 
 
-def _as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = False) -> str:
+def _as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = False, max_gap_steps: int | None = None) -> str:
     """The log as a CSV the filter reads: a CSV as it is; a MAVLink dive (.tlog, or an .mcap with
     /mavlink/ topics) converted from its telemetry; another .mcap (rovlab's topics: a simulation
     or a vehicle node's recording) from its measurement and command columns."""
@@ -172,7 +173,7 @@ def _as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = False) -> s
 
     suffix = Path(log).suffix.lower()
     if suffix in (".tlog", ".bin"):
-        return _mavlink_as_csv(log, vehicle, model, folder, trust=trust)
+        return _mavlink_as_csv(log, vehicle, model, folder, trust=trust, max_gap_steps=max_gap_steps)
     if suffix != ".mcap":
         return log
     try:
@@ -184,7 +185,7 @@ def _as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = False) -> s
     except OSError as exc:
         raise UserError(f"cannot read {log}: {exc.strerror or exc}") from None
     if any(t.startswith("/mavlink/") for t in topics):
-        return _mavlink_as_csv(log, vehicle, model, folder, trust=trust)
+        return _mavlink_as_csv(log, vehicle, model, folder, trust=trust, max_gap_steps=max_gap_steps)
     from rovlab.io.logwriter import write_csv
 
     out = folder / (Path(log).stem + ".csv")
@@ -192,14 +193,15 @@ def _as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = False) -> s
     return str(out)
 
 
-def _mavlink_as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = False) -> str:
+def _mavlink_as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = False,
+                    max_gap_steps: int | None = None) -> str:
     """A MAVLink dive (.tlog, DataFlash .BIN, or .mcap recorded by rovlab mavlink) as the CSV the
     filter reads, after checking the vehicle file against the autopilot parameters the log carries
     (frame, MOT_n_DIRECTION, PWM range: rovlab.interfaces.mavlink.autopilot) unless ``trust``."""
     from rovlab.interfaces.cli import UserError
     from rovlab.interfaces.mavlink import MavlinkMissing
     from rovlab.interfaces.mavlink.autopilot import TRUST_HINT, check_vehicle
-    from rovlab.interfaces.mavlink.logs import LogError, log_parameters, read_records, write_filter_log
+    from rovlab.interfaces.mavlink.logs import LogError, left_out_lines, log_parameters, read_records, write_filter_log
 
     out = folder / (Path(log).stem + ".csv")
     try:
@@ -216,9 +218,11 @@ def _mavlink_as_csv(log: str, vehicle, model, folder: Path, *, trust: bool = Fal
         if not params:
             print(f"rovlab filter: {log} carries no autopilot parameters: the vehicle file's thruster directions "
                   "cannot be checked", file=sys.stderr)
-        summary = write_filter_log(log, vehicle, model, out, records=records)
+        summary = write_filter_log(log, vehicle, model, out, records=records, max_gap_steps=max_gap_steps)
     except (LogError, MavlinkMissing, RuntimeError) as exc:
         raise UserError(str(exc)) from None
+    for line in left_out_lines(log, summary):
+        print(f"rovlab filter: {line}", file=sys.stderr)
     counts = ", ".join(f"{k} {v}" for k, v in summary["samples"].items())
     print(f"rovlab filter: {log}: {summary['messages']} MAVLink messages -> {summary['rows']} rows ({counts})",
           file=sys.stderr)
@@ -285,6 +289,9 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
     gaps = 0
     n_rows = 0
     t_first = t_last = t_prev = math.nan
+    rows_read = 0  # rows of the chunks before this one
+    converted = Path(stream.file) != Path(args.log)  # a MAVLink dive or an MCAP, converted into a temporary CSV
+    restart_times: dict[int, float] = {}  # row -> its time, for a converted log (its lines are the user's nowhere)
 
     def emit(writer: ChunkWriter, run) -> None:
         nonlocal n_rows
@@ -327,9 +334,13 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
                 samples += np.count_nonzero(~np.isnan(y), axis=0)
                 dt = np.diff(np.concatenate([[t_prev], t]) if math.isfinite(t_prev) else t)
                 gaps += int(np.count_nonzero((dt > 1.5 * model.h) & (dt <= (args.max_gap_steps + 0.5) * model.h)))
-                t_prev = float(t[-1])
                 for run in runner.feed(t, u, y, final=nxt is None):
                     emit(writer, run)
+                for r in runner.restart_rows:
+                    if r not in restart_times:
+                        restart_times[r] = float(t[r - rows_read]) if r >= rows_read else t_prev
+                t_prev = float(t[-1])
+                rows_read += t.size
                 chunk = nxt
         except IntervalError as exc:
             raise ConfigError([Problem(stream.file, stream.where(exc.row, "time_s"),
@@ -340,7 +351,10 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
         except OSError as exc:
             raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
         if runner.restarts > 100:
-            raise ConfigError([Problem(stream.file, stream.where(runner.restart_rows[0], "time_s"),
+            first = runner.restart_rows[0]
+            raise ConfigError([Problem(str(args.log) if converted else stream.file,
+                                       f"t = {restart_times[first] - t_first:.6g} s" if converted
+                                       else stream.where(first, "time_s"),
                                        f"{runner.restarts} gaps longer than {args.max_gap_steps} filter samples",
                                        f"a log sampled near the configuration's sample time h = {model.h:g} s "
                                        f"({config.file}: sample_time); gaps are exceptions")], "log")
@@ -355,7 +369,10 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
     if gaps:
         print(f"  {gaps} gap(s) in the log bridged by prediction", file=report)
     if runner.restarts:
-        where = ", ".join(stream.where(r) for r in runner.restart_rows)
+        if converted:  # the times in the dive (from its first message the filter uses)
+            where = ", ".join(f"t = {restart_times[r] - t_first:.6g} s" for r in runner.restart_rows)
+        else:
+            where = ", ".join(stream.where(r) for r in runner.restart_rows)
         print(f"  {runner.restarts} gap(s) longer than {args.max_gap_steps} samples "
               f"({args.max_gap_steps * model.h:g} s): the filter restarted from its prior at {where}"
               + (" ..." if runner.restarts > len(runner.restart_rows) else ""), file=report)

@@ -288,7 +288,7 @@ def _cmd_convert(args: argparse.Namespace) -> int:
     from rovlab.estimation.model import build_filter_model
     from rovlab.interfaces.cli import UserError
     from rovlab.interfaces.mavlink import MavlinkMissing
-    from rovlab.interfaces.mavlink.logs import LogError, write_filter_log
+    from rovlab.interfaces.mavlink.logs import LogError, left_out_lines, write_filter_log
     from rovlab.params.design import load_design_config
     from rovlab.params.vehicle import load_vehicle
 
@@ -302,6 +302,8 @@ def _cmd_convert(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
     except OSError as exc:
         raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    for line in left_out_lines(args.log, summary):
+        print(f"rovlab mavlink convert: {line}", file=sys.stderr)
     counts = ", ".join(f"{k} {v}" for k, v in summary["samples"].items())
     print(f"{args.log}: {summary['messages']} MAVLink messages -> {args.out}: {summary['rows']} rows ({counts})")
     return 0

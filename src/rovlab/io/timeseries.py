@@ -238,9 +238,10 @@ def mcap_topics(path: str | Path) -> set[str]:
         return topics
 
 
-def read_mcap_json(path: str | Path, *, prefix: str = "/") -> Any:
+def read_mcap_json(path: str | Path, *, prefix: str = "/", in_file_order: bool = False) -> Any:
     """(topic, UNIX time [s], message dict) of the JSON messages on topics starting with prefix,
-    in log-time order. Requires `mcap`."""
+    in log-time order (``in_file_order``: in the order they were written, so that a corrupted
+    log time can be told from its neighbours). Requires `mcap`."""
     try:
         from mcap.reader import make_reader
     except ImportError as exc:  # pragma: no cover - optional extra
@@ -249,7 +250,7 @@ def read_mcap_json(path: str | Path, *, prefix: str = "/") -> Any:
 
     with open(path, "rb") as fh:
         try:  # a finished file: its index gives log-time order
-            items = list(make_reader(fh).iter_messages(log_time_order=True))
+            items = list(make_reader(fh).iter_messages(log_time_order=not in_file_order))
         except Exception:  # noqa: BLE001 - a recording cut short (no summary): read it front to back
             fh.seek(0)
             items = []
@@ -258,7 +259,8 @@ def read_mcap_json(path: str | Path, *, prefix: str = "/") -> Any:
                     items.append(item)
             except Exception:  # noqa: BLE001 - the cut-off end
                 pass
-            items.sort(key=lambda m: m[2].log_time)
+            if not in_file_order:
+                items.sort(key=lambda m: m[2].log_time)
         for _schema, channel, message in items:
             if channel.message_encoding != "json" or not channel.topic.startswith(prefix):
                 continue

@@ -19,7 +19,7 @@ through the estimator.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,7 +78,8 @@ class TelemetryRecorder:
 
 def read_records(path: str | Path) -> list[Record]:
     """The MAVLink messages of a .tlog, of an MCAP recorded by :class:`TelemetryRecorder`, or of an
-    onboard DataFlash .BIN log as the MAVLink messages they correspond to (:func:`_read_bin`)."""
+    onboard DataFlash .BIN log as the MAVLink messages they correspond to (:func:`_read_bin`), in
+    the order the file holds them (the order they arrived: :func:`stamp_outliers`)."""
     path = Path(path)
     if not path.is_file():
         raise LogError(f"{path}: no such file")
@@ -92,7 +93,7 @@ def read_records(path: str | Path) -> list[Record]:
             from rovlab.io.timeseries import read_mcap_json
 
             records = [(t, topic[len(MAVLINK_PREFIX):], msg)
-                       for topic, t, msg in read_mcap_json(path, prefix=MAVLINK_PREFIX)]
+                       for topic, t, msg in read_mcap_json(path, prefix=MAVLINK_PREFIX, in_file_order=True)]
         except RuntimeError:
             raise
         except Exception as exc:  # noqa: BLE001 - the mcap reader raises its own types on a bad file
@@ -266,6 +267,47 @@ def surface_pressure_hpa(records: Iterable[Record]) -> float | None:
     return None
 
 
+def stamp_outliers(times: Sequence[float], limit: float, *, longest: int = 16) -> list[int]:
+    """Indices of the time stamps that leave the file's order and come back: more than ``limit``
+    seconds from the last stamp kept before them while one at most ``longest`` places later is
+    back within ``limit`` of it. A log is written as its messages arrive (a ground station's .tlog,
+    rovlab's recording), so such a stamp is corrupt, not a gap: a gap's later messages stay after
+    it. A not-finite stamp is always out; the first ones are judged by the ones after them; a jump
+    in the last ``longest`` messages that does not come back is kept (it cannot be told from a
+    gap). Work: O(n longest) whatever the stamps."""
+    t = [float(x) for x in times]
+    n = len(t)
+    isfinite = math.isfinite
+
+    def near(a: float, b: float) -> bool:
+        return abs(a - b) <= limit  # False for NaN
+
+    # the first stamp that agrees with the one after it: the earlier ones are judged by it
+    first = next((k for k in range(min(n, longest + 1)) if isfinite(t[k]) and (k + 1 >= n or near(t[k], t[k + 1]))),
+                 None)
+    if first is None:  # no two neighbours agree at the start: messages far apart (gaps), keep them
+        first = next((k for k in range(n) if isfinite(t[k])), n)
+    out = [k for k in range(min(first, n)) if not (first < n and near(t[k], t[first]))]
+    if first >= n:
+        return out
+    last = t[first]
+    i = first + 1
+    while i < n:
+        if near(t[i], last):
+            last = t[i]
+            i += 1
+            continue
+        back = next((j for j in range(i + 1, min(n, i + 1 + longest)) if near(t[j], last)), None)
+        if back is None and isfinite(t[i]):  # a jump the later messages keep: a gap
+            last = t[i]
+            i += 1
+            continue
+        stop = i + 1 if back is None else back
+        out.extend(range(i, stop))
+        i = stop
+    return out
+
+
 def filter_columns(records: list[Record], vehicle: Vehicle, channels: tuple[Any, ...], h: float, *,
                    surface_hpa: float | None = None, file: str = "<log>") -> dict[str, np.ndarray]:
     """The columns ``rovlab filter`` reads (time_s, tau_X, tau_Y, tau_Z, tau_N and one per channel):
@@ -320,18 +362,66 @@ def filter_columns(records: list[Record], vehicle: Vehicle, channels: tuple[Any,
     return cols
 
 
+MAX_LEFT_OUT = 100  # more messages with a corrupted time stamp than this: the log's clock is broken, refused
+
+
 def write_filter_log(log: str | Path, vehicle: Vehicle, model: Any, out: str | Path, *,
-                     surface_hpa: float | None = None, records: list[Record] | None = None) -> dict[str, Any]:
+                     surface_hpa: float | None = None, records: list[Record] | None = None,
+                     max_gap_steps: int | None = None) -> dict[str, Any]:
     """Convert a .tlog/.BIN/.mcap into the CSV ``rovlab filter`` reads (model: the filter model, for
     its channels and sample time; ``records``: the log's, if already read); returns a summary (rows,
-    samples per channel)."""
+    samples per channel, and ``left_out``: (message number from 1, type, time stamp, the stamp of
+    the nearest message kept) of each message whose time stamp is corrupt).
+
+    A corrupt stamp is one that leaves the log's order by more than the filter's gap limit
+    (``max_gap_steps`` samples, default rovlab.estimation.streaming.MAX_GAP_STEPS: 1000 s at
+    h = 0.1 s) and comes back (:func:`stamp_outliers`): its message is left out, since its time is
+    not known; sorted in, one such stamp 12 days on made the filter predict through 12 days or
+    restart there. More than ``MAX_LEFT_OUT`` of them: LogError (a broken clock, not a glitch)."""
+    from rovlab.estimation.streaming import MAX_GAP_STEPS
     from rovlab.io.logwriter import write_csv
 
     records = read_records(log) if records is None else records
+    limit = (MAX_GAP_STEPS if max_gap_steps is None else max_gap_steps) * float(model.h)
+    out_of_order = stamp_outliers([r[0] for r in records], limit)
+    drop = set(out_of_order)
+    left_out = [(i + 1, records[i][1], records[i][0], _kept_stamp(records, drop, i)) for i in out_of_order]
+    if len(left_out) > MAX_LEFT_OUT:
+        raise LogError(f"{log}: {len(left_out)} messages whose time stamps leave the log's order by more than "
+                       f"{limit:g} s and come back (the first: message {left_out[0][0]} ({left_out[0][1]}) stamped "
+                       f"{left_out[0][2]!r} s); expected a log whose stamps follow the order its messages were "
+                       f"written in: this one's clock is broken")
+    if drop:
+        records = [r for i, r in enumerate(records) if i not in drop]
     cols = filter_columns(records, vehicle, tuple(model.channels), float(model.h), surface_hpa=surface_hpa,
                           file=str(log))
     write_csv(out, cols, comments=[f"converted from {log} by rovlab mavlink for vehicle {vehicle.name}",
                                    "units: SI (s, m, rad, rad/s, N, N m); empty = no sample at that time"],
               exact=("time_s",))
-    return {"rows": int(cols["time_s"].size), "messages": len(records),
+    return {"rows": int(cols["time_s"].size), "messages": len(records) + len(left_out), "left_out": left_out,
+            "gap_limit_s": limit,
             "samples": {c.column: int(np.count_nonzero(~np.isnan(cols[c.column]))) for c in model.channels}}
+
+
+def _kept_stamp(records: list[Record], drop: set[int], i: int) -> float:
+    """The stamp of the nearest message kept before message i (after it, for the first ones)."""
+    before = next((records[k][0] for k in range(i - 1, -1, -1) if k not in drop), None)
+    if before is not None:
+        return before
+    return next((records[k][0] for k in range(i + 1, len(records)) if k not in drop), math.nan)
+
+
+def left_out_lines(log: str | Path, summary: Mapping[str, Any], *, limit: int = 5) -> list[str]:
+    """What :func:`write_filter_log` left out, one line per message (the first ``limit``)."""
+    gap = summary.get("gap_limit_s")
+    lines = []
+    for number, kind, stamp, near in summary.get("left_out", [])[:limit]:
+        off = stamp - near
+        lines.append(f"{log}: message {number} ({kind}): time stamp {stamp!r} s "
+                     + (f"is {off:+.6g} s from the messages around it" if math.isfinite(off) else "is not a time")
+                     + f"; left out (expected stamps in the order the messages were written, within {gap:g} s of "
+                       "the messages around them: a corrupted time stamp)")
+    more = len(summary.get("left_out", [])) - limit
+    if more > 0:
+        lines.append(f"{log}: {more} more message(s) with a corrupted time stamp left out")
+    return lines
