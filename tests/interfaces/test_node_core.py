@@ -246,3 +246,63 @@ def test_the_clock_can_wait_for_the_first_sample(udrone):
     late.tick(100.0)
     assert late.tick(104.9) == [] and late.tick(105.0) == []  # no sensor: the clock starts after 5 s ...
     assert [o.k for o in late.tick(105.0 + late.collect_s)] == [0]  # ... and runs from there
+
+
+def test_every_sample_is_used_when_several_arrive_in_one_period(udrone):
+    """Issue 27 (real rates): ArduSub sends ATTITUDE at 20 Hz, the filter runs at 10 Hz. Fed two
+    heading samples per period and one depth sample, the node fuses the older heading sample
+    first (a correction only), then runs the step with the newest of each channel: exactly what
+    the offline filter computes from the same samples as rows of one period
+    (rovlab.estimation.offline.ComponentFilter with no prediction between the two rows)."""
+    from rovlab.estimation.offline import ComponentFilter
+
+    core = NodeCore(*udrone, log=lambda msg: None)
+    h, m = core.h, len(core.channels)
+    jz = next(j for j, c in enumerate(core.channels) if c.quantity == "z")
+    jp = next(j for j, c in enumerate(core.channels) if c.quantity == "psi")
+    rng = np.random.default_rng(7)
+    n = 60
+    psi = 0.3 + 0.002 * rng.standard_normal((n, 2))
+    z = 1.0 + 0.003 * rng.standard_normal(n)
+    rows_t, rows_y, npred = [], [], []
+    node_x = np.empty((n, len(core.states)))
+    for k in range(n):
+        cz, cp = core.channels[jz], core.channels[jp]
+        assert core.push(cz.sensor, cz.quantity, z[k] + cz.offset, k * h) == "accepted"  # the clock starts here
+        assert core.push(cp.sensor, cp.quantity, psi[k, 0] + cp.offset, k * h - 0.25 * h) == "accepted"
+        assert core.push(cp.sensor, cp.quantity, psi[k, 1] + cp.offset, k * h + 0.25 * h) == "accepted"
+        outs = core.tick(k * h + core.collect_s + 1e-9)
+        assert [o.k for o in outs] == [k]
+        node_x[k] = outs[0].x
+        first, second = np.full(m, np.nan), np.full(m, np.nan)
+        first[jp] = psi[k, 0] + cp.offset
+        second[jz], second[jp] = z[k] + cz.offset, psi[k, 1] + cp.offset
+        rows_t += [k * h, k * h]
+        rows_y += [first, second]
+        npred += [0, 1]
+    assert core.counters["extra_corrections"] == n and core.counters["replaced"] == 0
+    offline = ComponentFilter(core.design.estimator)
+    run = offline.run(np.array(rows_t), np.zeros((2 * n, offline.p)), np.array(rows_y), n_predict=np.array(npred))
+    np.testing.assert_allclose(node_x, run.x[1::2], rtol=0, atol=1e-12)
+    # and it is not what fusing only the newest heading sample gives
+    alone = NodeCore(*udrone, log=lambda msg: None)
+    for k in range(n):
+        for j, v in ((jz, z[k]), (jp, psi[k, 1])):
+            c = alone.channels[j]
+            alone.push(c.sensor, c.quantity, v + c.offset, k * h)
+        alone.tick(k * h + alone.collect_s + 1e-9)
+    assert alone.last is not None and np.max(np.abs(alone.last.P - core.last.P)) > 1e-9
+
+
+def test_a_flood_of_samples_for_one_step_keeps_the_newest(udrone):
+    """More than ``max_queue`` samples of a channel for one step (a sensor stamping in a burst):
+    the oldest are dropped and counted, the step still runs once with the newest."""
+    core = NodeCore(*udrone, log=lambda msg: None, max_queue=4)
+    c = core.channels[0]
+    for i in range(10):
+        assert core.push(c.sensor, c.quantity, 0.5 + c.offset, 0.001 * i) == "accepted"
+    outs = core.tick(core.collect_s + 1e-9)
+    assert [o.k for o in outs] == [0]
+    assert core.counters["replaced"] == 6 and core.counters["extra_corrections"] == 3
+    with pytest.raises(ValueError, match="max_queue"):
+        NodeCore(*udrone, log=lambda msg: None, max_queue=0)

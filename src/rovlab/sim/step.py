@@ -92,10 +92,13 @@ def command(t, est, ctrl, act, ref, engaged, nav, tau, tau_cmd, tau_real, pwm, c
 
 
 @njit(cache=True, **WITHOUT_NRT)  # no reference counting, no allocation: as rovlab.sim.loop.run_loop
-def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, out):
+def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, out, correct_only=False):
     """One control step at time t [s] with the samples y (NaN where ``present`` is False): the
     loop's step between sampling the sensors and advancing the plant (:func:`estimate`, then
-    :func:`command`).
+    :func:`command`). With ``correct_only`` the estimator is only corrected (:func:`estimate`):
+    how a vehicle that received several samples of a channel in one control period fuses the
+    older ones before the step (rovlab.interfaces.node.core), as the offline filter fuses several
+    rows of one period one after another (rovlab.estimation.streaming).
 
     Fills the arrays of ``out`` (:class:`StepOut`): the estimator's per-channel report, the
     corrected estimate and covariance at t, the estimate in the TRUTH layout the controller
@@ -105,7 +108,8 @@ def control_step(t, est, ctrl, act, nav_of, y, present, ref, engaged, out):
     still corrects and predicts with the zero wrench.
     """
     estimate(t, est, nav_of, y, present, out.rep, out.nav, out.x, out.P)
-    command(t, est, ctrl, act, ref, engaged, out.nav, out.tau, out.tau_cmd, out.tau_real, out.pwm, out.ctrl)
+    if not correct_only:
+        command(t, est, ctrl, act, ref, engaged, out.nav, out.tau, out.tau_cmd, out.tau_real, out.pwm, out.ctrl)
 
 
 control_step_uncached = njit(cache=False, **WITHOUT_NRT)(getattr(control_step, "py_func", control_step))

@@ -27,12 +27,17 @@ samples at the control rate. The filter sees the time k h. With ``wait_for_sampl
 (the ROS nodes use 10 s) ticks before the first sample run nothing for that long, so a node started
 before its sensors does not dead-reckon (and time its sensors out) before they ever spoke.
 
-**Samples.** A sample belongs to the step nearest its stamp. Per channel, the newest sample for
-a step at or before the current one is used; what else can happen is returned by :meth:`push`
-and counted in :attr:`counters`:
+**Samples.** A sample belongs to the step nearest its stamp, and every sample is used, at any
+rate: a step corrects the filter with the newest sample of each channel that belongs to it (or to
+an earlier step), and, before that, with the older ones of a channel that sent several in one
+period (a 20 Hz heading at h = 0.1 s), one after another in the order of their stamps (several
+channels in one correction as long as none repeats) -- as the offline filter fuses several rows
+of one period (rovlab.estimation.streaming), so a live node and ``rovlab filter`` on its
+recording use the same samples. What can happen to a sample is returned by :meth:`push` and
+counted in :attr:`counters`:
 
-* ``accepted``: stored for its step (a newer sample of the same channel for the same or a later
-  step replaces an older one: ``replaced`` is counted);
+* ``accepted``: stored for its step (at most ``max_queue`` samples of a channel wait for one
+  step; beyond that the oldest is dropped and ``replaced`` is counted);
 * ``late``: its step is more than ``max_lag`` steps before the next one (default 1: a sample that
   arrived just after its step ran is still used at the next step);
 * ``out-of-order``: not newer than a sample of the same channel already stored or used;
@@ -42,7 +47,7 @@ and counted in :attr:`counters`:
   dropped;
 * ``invalid``: not a finite number or timestamp (``last_problem`` says what and where).
 
-A step runs as soon as every enabled channel has its sample (low latency), and at the latest at
+A step runs as soon as every enabled channel has a sample for it (low latency), and at the latest at
 T_k + ``collect_s`` (default h / 2) with whatever arrived: a channel without a sample is a missing
 sample, which the filter's sensor management handles (dead reckoning, timeout -> lost). A step
 due while earlier ones were not run (the adapter stalled) is preceded by those, each without
@@ -59,6 +64,7 @@ import math
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -153,7 +159,8 @@ class NodeCore:
     def __init__(self, vehicle: Vehicle, config: DesignConfig, *, estimator: str | None = None,
                  controller: str | None = None, pwm_resolution_us: float = 1.0, collect_s: float | None = None,
                  max_lag: int = 1, max_ahead_s: float = 1.0, max_catch_up: int = 600,
-                 log: Callable[[str], None] | None = None, wait_for_samples_s: float = 0.0) -> None:
+                 log: Callable[[str], None] | None = None, wait_for_samples_s: float = 0.0,
+                 max_queue: int = 32) -> None:
         self._lock = threading.RLock()
         self._log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
         self._names = (estimator, controller)
@@ -161,8 +168,12 @@ class NodeCore:
         self.max_lag = int(max_lag)
         self.max_ahead_s = float(max_ahead_s)
         self.max_catch_up = int(max_catch_up)
+        if int(max_queue) < 1:
+            raise ValueError(f"max_queue must be at least 1 (samples of a channel waiting for a step), got {max_queue!r}")
+        self.max_queue = int(max_queue)
         self._collect = collect_s
-        self.counters: dict[str, int] = {r: 0 for r in SAMPLE_RESULTS} | {"replaced": 0, "steps": 0, "rebased": 0}
+        self.counters: dict[str, int] = {r: 0 for r in SAMPLE_RESULTS} | {"replaced": 0, "steps": 0, "rebased": 0,
+                                                                         "extra_corrections": 0}
         self.last_problem = ""
         self.last: NodeOutput | None = None
         self.sensor_enabled: dict[str, bool] = {}
@@ -253,11 +264,11 @@ class NodeCore:
                 return self._count("late")
             if s > self.t0 + self.k * self.h + self.max_ahead_s:
                 return self._count("future")
-            if not math.isnan(self._pending_stamp[j]):
+            queue = self._queue[j]
+            if len(queue) >= self.max_queue:
+                queue.popleft()
                 self.counters["replaced"] += 1
-            self._pending[j] = v
-            self._pending_stamp[j] = s
-            self._pending_step[j] = step
+            queue.append((v, s, step))
             self._stamp[j] = s
             return self._count("accepted")
 
@@ -298,7 +309,7 @@ class NodeCore:
             if not enabled:
                 for j, c in enumerate(self.channels):
                     if c.sensor == sensor:
-                        self._pending_stamp[j] = math.nan
+                        self._queue[j].clear()
 
     def set_filter_mode(self, channel: str, mode: str) -> None:
         """Force a filter channel 'off' or 'on', or back to 'auto'."""
@@ -368,26 +379,52 @@ class NodeCore:
     def _complete(self) -> bool:
         want = [j for j, c in enumerate(self.channels) if self.sensor_enabled.get(c.sensor, True)
                 and self.estimator.ch[j, CH_MODE] != MODE_OFF and self._expected[j]]
-        return bool(want) and all(not math.isnan(self._pending_stamp[j]) and self._pending_step[j] == self.k
-                                  for j in want)
+        return bool(want) and all(any(step == self.k for _, _, step in self._queue[j]) for j in want)
 
     def _step(self, now: float) -> NodeOutput:
         k = self.k
-        y, present = self._y, self._present
-        for j in range(len(self.channels)):
-            use = not math.isnan(self._pending_stamp[j]) and self._pending_step[j] <= k
-            present[j] = use
-            y[j] = self._pending[j] if use else math.nan
-            if use:
-                self._pending_stamp[j] = math.nan
         t = k * self.h
+        y, present = self._y, self._present
+        newest: list[float | None] = [None] * len(self.channels)
+        older: list[tuple[float, int, float]] = []  # (stamp, channel, value) of the samples before the newest
+        for j, queue in enumerate(self._queue):
+            due = []
+            while queue and queue[0][2] <= k:  # steps grow with the stamps: the due samples lead the queue
+                due.append(queue.popleft())
+            if due:
+                newest[j] = due[-1][0]
+                older.extend((stamp, j, v) for v, stamp, _ in due[:-1])
+        if older:  # several samples of a channel in this period: the older ones first, in stamp order
+            older.sort()
+            group: dict[int, float] = {}
+            for _, j, v in older:
+                if j in group:
+                    self._correct(t, group)
+                    group = {}
+                group[j] = v
+            self._correct(t, group)
+        for j, last in enumerate(newest):
+            present[j] = last is not None
+            y[j] = math.nan if last is None else last
         self._kernel(t, self.estimator, self.controller, self.actuators, self._nav_of, y, present, self.reference,
-                     self.engaged, self._out)
+                     self.engaged, self._out, False)
         self.k = k + 1
         self.counters["steps"] += 1
         out = self._output(k, t)
         self.last = out
         return out
+
+    def _correct(self, t: float, samples: dict[int, float]) -> None:
+        """Correct the estimator only (no control step) with ``samples`` (channel -> value)."""
+        y, present = self._y, self._present
+        present[:] = False
+        y[:] = math.nan
+        for j, v in samples.items():
+            present[j] = True
+            y[j] = v
+        self.counters["extra_corrections"] += 1
+        self._kernel(t, self.estimator, self.controller, self.actuators, self._nav_of, y, present, self.reference,
+                     self.engaged, self._out, True)
 
     def _output(self, k: int, t: float) -> NodeOutput:
         ch = self.estimator.ch
@@ -453,7 +490,8 @@ class NodeCore:
             with explain_allocation((est, ctl)):
                 kernel(0.0, ew, cw, act, nav_of, np.full(m, np.nan), np.zeros(m, dtype=np.bool_), np.zeros(4), True,
                        StepOut(np.empty((m, N_REP)), np.zeros(N_TRUTH), np.zeros(4), np.zeros(4), np.zeros(4),
-                               np.empty(len(alloc.bank.names)), np.empty(n), np.empty((n, n)), np.empty(cw.state.shape[0])))
+                               np.empty(len(alloc.bank.names)), np.empty(n), np.empty((n, n)), np.empty(cw.state.shape[0])),
+                       False)
             _COMPILED.add(key)
             self._log(f"rovlab node: control step ready ({time.perf_counter() - started:.1f} s)")
         self.design = design
@@ -466,11 +504,9 @@ class NodeCore:
         rates = {c.sensor: design.vehicle.sensor(c.sensor).rate_hz for c in design.estimator.channels}
         self._expected = [rates[c.sensor] * design.estimator.h >= 1.0 - 1e-9 for c in channels]  # a sample every step
         self.sensor_enabled = {s: self.sensor_enabled.get(s, True) for s in dict.fromkeys(c.sensor for c in channels)}
-        old_pending = getattr(self, "_pending", None)
-        if old_pending is None or len(old_pending) != m:
-            self._pending = np.full(m, np.nan)
-            self._pending_stamp = np.full(m, np.nan)
-            self._pending_step = np.zeros(m, dtype=np.int64)
+        old_queue = getattr(self, "_queue", None)
+        if old_queue is None or len(old_queue) != m:
+            self._queue: list[deque[tuple[float, float, int]]] = [deque() for _ in range(m)]  # (value, stamp, step)
             self._stamp = np.full(m, -np.inf)
         self._y = np.full(m, np.nan)
         self._present = np.zeros(m, dtype=np.bool_)
