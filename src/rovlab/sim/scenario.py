@@ -272,6 +272,19 @@ def _resolve_relative(ref: str, file: str) -> str:
     return ref
 
 
+def _component_name(top: TableReader, kind: str) -> str | None:
+    """A scenario's choice of estimator or controller (None: the design configuration's), checked
+    against the registry here (names only, nothing imported), so that no command builds a compile
+    line or a cache key from a name that is not one."""
+    from rovlab.core.components import component_names, unknown_component
+
+    name = top.string(kind, "") or None
+    if name is not None and name not in component_names(kind):
+        top.problem(kind, name, unknown_component(kind, name))
+        return None
+    return name
+
+
 def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenario:
     top = TableReader(data, col)
     top.raw("seed", 0)  # already handled
@@ -281,8 +294,8 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
     vehicle = _resolve_relative(top.string("vehicle", "udrone"), file)
     design = _resolve_relative(top.string("design", "default"), file)
     plant = top.string("plant", "process", choices=PLANTS)
-    estimator = top.string("estimator", "") or None  # checked against the registry at prepare
-    controller = top.string("controller", "") or None
+    estimator = _component_name(top, "estimator")
+    controller = _component_name(top, "controller")
     duration = top.number("duration_s", positive=True, hi=1e6)
     step = top.number("plant_step_s", 0.01, positive=True, plausible=PLANT_STEP_RANGE, what="s")
     if math.isfinite(duration) and math.isfinite(step) and duration / step > MAX_PLANT_STEPS:
