@@ -51,6 +51,7 @@ demo: $(STAMP)
 
 test: $(STAMP) $(PEERS_STAMP)
 	./scripts/ensure-chromium.sh
+	./scripts/ensure-node-peers.sh
 	$(MAKE) --no-print-directory ros2-env
 	$(MAKE) --no-print-directory ros1-env
 	$(BIN)/ruff check src tests benchmarks examples
