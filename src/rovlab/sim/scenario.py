@@ -95,7 +95,8 @@ PSD_RANGE = (0.0, 1e4)  # process-noise spectral density [N^2/Hz, (N m)^2/Hz]
 BIAS_STD_RANGE = {"surge": (0.0, 1e3), "sway": (0.0, 1e3), "heave": (0.0, 1e3), "yaw": (0.0, 1e2)}  # [N, N m]
 BIAS_TIME_RANGE = (0.1, 1e8)  # [s]
 BUOYANCY_OFFSET_RANGE = (-1e3, 1e3)  # [N]
-PWM_RESOLUTION_RANGE = (0.0, 100.0)  # [us]
+PWM_RESOLUTION_RANGE = (1e-3, 100.0)  # [us], or 0 (none): ArduSub commands whole microseconds (SERVO_OUTPUT_RAW
+# is uint16 us); 1e-3 us would be a 1 GHz timer. Finer: cmd / res overflowed to PWM = inf (issue 28)
 CURRENT_RANGE = (-5.0, 5.0)  # ocean current per NED axis [m/s]
 CURRENT_KEYS = ("north", "east", "down")
 
@@ -356,7 +357,12 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
     bias_T = _dof_numbers(tr, "bias_time_constant_s", {d: 60.0 for d in DOF_NAMES}, positive=True,
                           ranges={d: BIAS_TIME_RANGE for d in DOF_NAMES})
     buoy = tr.number("buoyancy_offset", 0.0, plausible=BUOYANCY_OFFSET_RANGE, what="N")
-    pwm_res = tr.number("pwm_resolution_us", 1.0, nonnegative=True, plausible=PWM_RESOLUTION_RANGE, what="us")
+    pwm_res = tr.number("pwm_resolution_us", 1.0, what="us")
+    if pwm_res != 0.0 and not PWM_RESOLUTION_RANGE[0] <= pwm_res <= PWM_RESOLUTION_RANGE[1]:  # NaN: reported
+        if not math.isnan(pwm_res):
+            tr.problem("pwm_resolution_us", pwm_res, "0 (none) or a resolution within "
+                       f"{PWM_RESOLUTION_RANGE[0]:g} .. {PWM_RESOLUTION_RANGE[1]:g} us (an ESC's command step)")
+        pwm_res = math.nan
     cur = tr.table("current", required=False)
     current = np.array([cur.number(k, 0.0, plausible=CURRENT_RANGE, what="m/s, NED") for k in CURRENT_KEYS])
     cur.finish()
@@ -374,7 +380,7 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
     tether = _tether(tr)
     tr.finish()
     top.finish()
-    _check_references(top, vehicle, design, step, dropouts)
+    _check_references(top, vehicle, design, step, duration, dropouts)
     col.raise_if_any("scenario file")
     return Scenario(
         name=name, description=description, source=source, vehicle=vehicle, design=design, plant=plant,
@@ -387,11 +393,13 @@ def _read(data: dict[str, Any], col: Collector, file: str, seed: int) -> Scenari
     )
 
 
-def _check_references(top: TableReader, vehicle: str, design: str, step: float,
+def _check_references(top: TableReader, vehicle: str, design: str, step: float, duration: float,
                       dropouts: list[Dropout]) -> None:
     """Problems that need the files the scenario names, collected with the scenario's own (so a
     file reports all its problems at once): the vehicle and the configuration load, the plant
-    step divides the filter's sample time, and each drop-out names a sensor channel of the vehicle.
+    step divides the filter's sample time, the run lasts at least one control step (a shorter
+    one is a single row: duration_s = 1e-308 gave metrics of one sample), and each drop-out
+    names a sensor channel of the vehicle.
     """
     v = _load_reference(top, "vehicle", vehicle, load_vehicle)
     c = _load_reference(top, "design", design, load_design_config)
@@ -400,6 +408,9 @@ def _check_references(top: TableReader, vehicle: str, design: str, step: float,
         n_sub = int(round(h / step))
         if n_sub < 1 or abs(n_sub * step - h) > 1e-9 * h:
             top.problem("plant_step_s", step, f"a step that divides the filter's sample time {h:g} s")
+    if c is not None and math.isfinite(duration) and duration < c.sample_time:
+        top.problem("duration_s", duration, f"at least one control step of the design (its sample_time, "
+                    f"{c.sample_time:g} s)")
     if v is None:
         return
     for i, d in enumerate(dropouts):
