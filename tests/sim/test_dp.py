@@ -103,6 +103,9 @@ def test_back_calculation_stops_integral_windup(udrone, cfg):
     persistent error the integral stays bounded with back-calculation and grows without it."""
     def integral_after(anti_windup):
         c = dp.build(udrone, cfg.with_table("dp", replace(cfg.table("dp"), anti_windup=anti_windup))).kernel
+        # without the thrust-capacity clamp (tests/control/test_dp_integral_limit.py), which would stop
+        # the plain integral at 145 m s: here the back-calculation alone
+        c = c._replace(int_lo=np.full(4, -np.inf), int_hi=np.full(4, np.inf))
         nav = np.zeros(12)
         nav[2] = 1.0
         tau = np.empty(4)

@@ -17,13 +17,26 @@ and Motion Control, Wiley:
   placement on the decoupled mass-damper of each axis): with the NED error
   e = eta_hat - eta_d (heading wrapped) and the body velocity error nu_tilde = nu_hat - R(psi)^T eta_d',
 
-      tau = M nu_d' + D(nu_d) nu_d                             (feed-forward of the reference)
+      tau = M nu_r' + C(nu_hat_r) nu_hat_r + D(nu_r) nu_r       (model feed-forward)
             - R(psi)^T (K_p e + K_i int e) - K_d nu_tilde        (PID, the integral kept in NED)
             - b_hat                                              (bias feed-forward)
 
-  nu_d = R(psi)^T eta_d' and nu_d' ~ R(psi)^T eta_d'' in surge and sway; D(nu_d) the model's linear,
-  quadratic and cubic damping (at 20 deg/s of turn uDrone's quadratic yaw damping alone needs
-  0.19 N m, which the PID would otherwise meet with a heading error);
+  nu_d = R(psi)^T eta_d' and nu_r = R(psi)^T (eta_d' - V_c) = nu_d - nu_c the reference's velocity
+  through the water, V_c the current the estimator's model knows (``[ekf] current``; 0 when unknown:
+  the biases carry its force then); nu_r' = R(psi)^T eta_d'' + r_d [v_r, -u_r] (the body turning at
+  the reference's yaw rate r_d), with w_r = w_d - V_c,D and r_r = r_d in heave and yaw. D(nu_r) the
+  model's linear, quadratic and cubic damping on the reference (at 20 deg/s of turn uDrone's
+  quadratic yaw damping alone needs 0.19 N m, which the PID would otherwise meet with a heading
+  error). C the rigid-body and added-mass Coriolis-centripetal terms of the plant's model
+  (rovlab.models.kinetics; Fossen 2011, sec. 8.3, Property 8.1 for an irrotational current), among
+  them the Munk moment (X_udot - Y_vdot) u_r v_r, at the *estimated* velocity through the water
+  nu_hat_r = nu_hat - nu_c (and r_hat): C is skew-symmetric, so cancelling it with the estimate takes
+  no damping from the loop (the damping stays on the reference, where K_d = 2 zeta omega_n M - D_L
+  counts on it), and it cancels the Munk moment's change as the vehicle moves, which an unknown
+  current's fast yaw bias did. An estimator told the current takes its drag and Munk moment out of
+  its biases, so the controller must feed them forward: without it telling uDrone's EKF the
+  current made DP station keeping three to six times worse (issue 28, item 2; docs/dp.md). On the
+  reference (nu_hat = nu_d) the wrench is the model's inverse dynamics;
   K_p = M omega_n^2, K_d = 2 zeta omega_n M - D_L, K_i = (omega_n / 10) K_p (the rule of thumb
   K_i ~ omega_n / 10 K_p; ``integral_ratio``). M = diag(m - X_udot, m - Y_vdot, m - Z_wdot,
   I_zz - N_rdot), D_L = -diag(X_u, Y_v, Z_w, N_r). The bias is **subtracted**: it enters the model
@@ -32,7 +45,12 @@ and Motion Control, Wiley:
 * **Anti-windup** by back-calculation (Astrom & Hagglund 2006, Advanced PID Control, sec. 3.5):
   when the allocation achieves tau_a != tau_d (thrusters saturated), the integral moves so the PID
   output approaches what was achieved: int e' = e - (k_t / K_i) R(psi) (tau_a - tau_d),
-  k_t = anti_windup * omega_n.
+  k_t = anti_windup * omega_n. Back-calculation holds the integral where the error is constant; a
+  current the thrusters cannot hold makes the error grow, and the integral with it. So the
+  integral is also clamped: its force K_i int stays within the thrust capacity of its axis
+  (:func:`thrust_capacity`: what the allocation gives in that DOF alone; x and y, kept in NED,
+  within the most of surge or sway either way), and the state always means a force the thrusters
+  could give.
 
 State (logged as ctrl_<name>): the reference model (eta_d, eta_d', eta_d''), the NED integral,
 the last NED error and a started flag.
@@ -81,6 +99,7 @@ from rovlab.core.components import (
     register_controller,
 )
 from rovlab.models import kinetics as kin
+from rovlab.models.thrusters import ThrusterBank
 from rovlab.params.design import DesignConfig, per_key
 from rovlab.params.validate import ConfigError, Problem, TableReader
 from rovlab.params.vehicle import Vehicle
@@ -126,6 +145,10 @@ class DP(NamedTuple):
     D: np.ndarray  # diagonal linear damping (positive)
     Dq: np.ndarray  # diagonal quadratic damping (positive)
     Dc: np.ndarray  # diagonal cubic damping (positive)
+    rb: np.ndarray  # (5) m, x_g, y_g, X_udot, Y_vdot: the Coriolis-centripetal terms (incl. the Munk moment)
+    current: np.ndarray  # (3) the known current in NED [m/s] (the estimator's; 0 = unknown, in the biases)
+    int_lo: np.ndarray  # (4) bounds of the integral state: K_i int stays within the thrust capacity
+    int_hi: np.ndarray  # (4)
     omega_r: np.ndarray  # reference-model natural frequencies [rad/s]
     zeta_r: float
     v_max: np.ndarray  # reference-model speed limits (m/s, rad/s)
@@ -157,7 +180,7 @@ def reference_model_step(eta, vel, acc, r, omega, zeta, v_max, h, n_sub):
 
 @njit(cache=True, inline="always")
 def _damping(ctrl, i, v):
-    """The model's damping force of axis i at the reference velocity v (feed-forward)."""
+    """The model's damping force of axis i at the relative velocity v (feed-forward)."""
     return (ctrl.D[i] + ctrl.Dq[i] * abs(v) + ctrl.Dc[i] * v * v) * v
 
 
@@ -192,12 +215,29 @@ def _dp_step(ctrl, t, nav, ref, tau):
     v_d = -sn * vx + c * vy
     du_d = c * ax + sn * ay
     dv_d = -sn * ax + c * ay
-    tau[0] = (ctrl.M[0] * du_d + _damping(ctrl, 0, u_d) - (c * fx + sn * fy) - ctrl.Kd[0] * (nav[NAV_U] - u_d) - nav[NAV_BX])
-    tau[1] = (ctrl.M[1] * dv_d + _damping(ctrl, 1, v_d) - (-sn * fx + c * fy) - ctrl.Kd[1] * (nav[NAV_V] - v_d) - nav[NAV_BY])
-    tau[2] = (ctrl.M[2] * s[_ACC + 2] + _damping(ctrl, 2, s[_VEL + 2]) - ctrl.Kp[2] * e2 - ctrl.Ki[2] * s[_INT + 2]
-              - ctrl.Kd[2] * (nav[NAV_W] - s[_VEL + 2]) - nav[NAV_BZ])
-    tau[3] = (ctrl.M[3] * s[_ACC + 3] + _damping(ctrl, 3, s[_VEL + 3]) - ctrl.Kp[3] * e3 - ctrl.Ki[3] * s[_INT + 3]
-              - ctrl.Kd[3] * (nav[NAV_R] - s[_VEL + 3]) - nav[NAV_BN])
+    # the model along the reference, in the velocity relative to the known current (module docstring):
+    # nu_r = R^T (eta_d' - V_c), its derivative with the body turning at r_d, Coriolis and damping
+    r_d = s[_VEL + 3]
+    cur = ctrl.current
+    u_r = u_d - (c * cur[0] + sn * cur[1])
+    v_r = v_d - (-sn * cur[0] + c * cur[1])
+    w_r = s[_VEL + 2] - cur[2]
+    # the Coriolis-centripetal terms (the Munk moment among them) at the estimated relative velocity:
+    # they do no work (C skew-symmetric), so cancelling them removes no damping (module docstring)
+    u_e = nav[NAV_U] - (u_d - u_r)
+    v_e = nav[NAV_V] - (v_d - v_r)
+    r_e = nav[NAV_R]
+    rb = ctrl.rb
+    m, x_g, y_g, X_udot, Y_vdot = rb[0], rb[1], rb[2], rb[3], rb[4]
+    ff0 = ctrl.M[0] * (du_d + r_d * v_r) - (m * (v_e + x_g * r_e) - Y_vdot * v_e) * r_e + _damping(ctrl, 0, u_r)
+    ff1 = ctrl.M[1] * (dv_d - r_d * u_r) + (m * (u_e - y_g * r_e) - X_udot * u_e) * r_e + _damping(ctrl, 1, v_r)
+    ff2 = ctrl.M[2] * s[_ACC + 2] + _damping(ctrl, 2, w_r)
+    ff3 = (ctrl.M[3] * s[_ACC + 3] + m * r_e * (x_g * u_e + y_g * v_e) + (X_udot - Y_vdot) * u_e * v_e
+           + _damping(ctrl, 3, r_d))
+    tau[0] = ff0 - (c * fx + sn * fy) - ctrl.Kd[0] * (nav[NAV_U] - u_d) - nav[NAV_BX]
+    tau[1] = ff1 - (-sn * fx + c * fy) - ctrl.Kd[1] * (nav[NAV_V] - v_d) - nav[NAV_BY]
+    tau[2] = ff2 - ctrl.Kp[2] * e2 - ctrl.Ki[2] * s[_INT + 2] - ctrl.Kd[2] * (nav[NAV_W] - s[_VEL + 2]) - nav[NAV_BZ]
+    tau[3] = ff3 - ctrl.Kp[3] * e3 - ctrl.Ki[3] * s[_INT + 3] - ctrl.Kd[3] * (nav[NAV_R] - r_d) - nav[NAV_BN]
     # advance the reference model toward the set-point (heading: the short way round)
     for i in range(4):
         r = ref[i]
@@ -220,7 +260,9 @@ def _dp_actuated(ctrl, t, tau_demanded, tau_achieved):
     for i in range(4):
         if ctrl.Ki[i] > 0.0:
             # PID output u = -(K_p e + K_i xi): xi' = e - (k_t / K_i) d moves u toward what was achieved
-            s[_INT + i] += ctrl.h * (s[_ERR + i] - ctrl.k_t[i] / ctrl.Ki[i] * d[i])
+            xi = s[_INT + i] + ctrl.h * (s[_ERR + i] - ctrl.k_t[i] / ctrl.Ki[i] * d[i])
+            # and K_i xi no more than the thrusters can give along the axis (module docstring)
+            s[_INT + i] = min(max(xi, ctrl.int_lo[i]), ctrl.int_hi[i])
 
 
 register_controller(DP, state=("state",), step=_dp_step, actuated=_dp_actuated)
@@ -236,6 +278,62 @@ class DPDesign:
     M: np.ndarray
     D: np.ndarray
     config: DPConfig
+    tau_min: np.ndarray = field(default_factory=lambda: np.full(4, -np.inf))  # thrust capacity per DOF X, Y, Z, N
+    tau_max: np.ndarray = field(default_factory=lambda: np.full(4, np.inf))  # (thrust_capacity) [N, N m]
+    current: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the known current (NED) [m/s]
+
+    @property
+    def integral_limit(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lowest, highest) integral state per axis x, y, z, psi [m s, rad s]: its force -K_i int
+        within the thrust capacity; x and y (NED, turning with the heading) within the most the
+        thrusters give in surge or sway either way, z and psi within their own capacity each way."""
+        horizontal = float(np.max(np.abs(np.concatenate([self.tau_min[:2], self.tau_max[:2]]))))
+        up = np.array([horizontal, horizontal, -self.tau_min[2], -self.tau_min[3]])  # most force against +int
+        down = np.array([horizontal, horizontal, self.tau_max[2], self.tau_max[3]])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            hi = np.where(self.Ki > 0.0, up / self.Ki, np.inf)
+            lo = np.where(self.Ki > 0.0, -down / self.Ki, -np.inf)
+        return lo, hi
+
+
+def thrust_capacity(vehicle: Vehicle) -> tuple[np.ndarray, np.ndarray]:
+    """(most negative, most positive) force or moment per DOF X, Y, Z, N [N, N m] that the
+    thrusters give in that DOF alone, every other DOF (roll and pitch included) at zero: what the
+    saturation-aware allocation answers to a pure demand (rovlab.allocation.Allocator; control does
+    not import allocation, so the same small linear program is solved here:
+    tests/control/test_dp_integral_limit.py compares the two)."""
+    from scipy.optimize import linprog
+
+    r = np.array([th.position for th in vehicle.thrusters], dtype=float).reshape(-1, 3)
+    e = np.array([th.direction for th in vehicle.thrusters], dtype=float).reshape(-1, 3)
+    B = np.vstack([e.T, np.cross(r, e).T])  # 6 x n, rows X, Y, Z, K, M, N (Fossen 2011, sec. 12.3)
+    bank = ThrusterBank.from_vehicle(vehicle)
+    n = B.shape[1]
+    lo, hi = np.zeros(4), np.zeros(4)
+    for k, row in enumerate((0, 1, 2, 5)):
+        A = np.hstack([B, -np.eye(6)[:, [row]]])  # B f - t e_row = 0
+        bounds = [(float(a), float(b)) for a, b in zip(bank.f_min, bank.f_max)] + [(None, None)]
+        for sign, out in ((1.0, hi), (-1.0, lo)):
+            cost = np.zeros(n + 1)
+            cost[-1] = -sign  # maximise sign * t
+            res = linprog(cost, A_eq=A, b_eq=np.zeros(6), bounds=bounds, method="highs")
+            out[k] = float(res.x[-1]) if res.status == 0 else 0.0
+    return lo, hi
+
+
+def known_current(config: DesignConfig) -> np.ndarray:
+    """The current the estimator's model knows (NED, m/s): its table's ``current`` (``[ekf]
+    current``), else 0. An estimator that models a current takes its drag and Munk moment out of
+    its force biases, so the controller has to feed them forward itself."""
+    try:
+        table = config.table(config.estimator)
+    except KeyError:  # an estimator without a table (the depth-and-heading KF)
+        return np.zeros(3)
+    cur = getattr(table, "current", None)
+    if cur is None:
+        return np.zeros(3)
+    cur = np.asarray(cur, dtype=float).ravel()
+    return cur.copy() if cur.shape == (3,) and np.all(np.isfinite(cur)) else np.zeros(3)
 
 
 def design(vehicle: Vehicle, config: DesignConfig) -> DPDesign:
@@ -254,15 +352,20 @@ def design(vehicle: Vehicle, config: DesignConfig) -> DPDesign:
         raise ConfigError([Problem(config.file or config.name, "dp.bandwidth", {a: float(w) for a, w in zip(DP_AXES, wn)},
                                    f"a bandwidth for which 2 zeta omega_n M exceeds the vehicle's own damping on "
                                    f"{', '.join(bad)} (raise the bandwidth or the damping)")], "filter configuration")
-    return DPDesign(Kp, Ki, Kd, M, D, dc)
+    tau_min, tau_max = thrust_capacity(vehicle)
+    return DPDesign(Kp, Ki, Kd, M, D, dc, tau_min, tau_max, known_current(config))
 
 
 def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:
     """The DP component of a configuration (raises ConfigError)."""
     d = design(vehicle, config)
     dc = config.table("dp")
+    int_lo, int_hi = d.integral_limit
+    rb = np.array([vehicle.mass, vehicle.r_g[0], vehicle.r_g[1], vehicle.added_mass[0], vehicle.added_mass[1]],
+                  dtype=float)
     kernel = DP(d.Kp, d.Ki, d.Kd, d.M, d.D, -np.asarray(vehicle.damping_quadratic, dtype=float),
-                -np.asarray(vehicle.damping_cubic, dtype=float), np.array(dc.reference_bandwidth, dtype=float),
+                -np.asarray(vehicle.damping_cubic, dtype=float), rb, d.current.copy(), int_lo, int_hi,
+                np.array(dc.reference_bandwidth, dtype=float),
                 float(dc.reference_damping),
                 np.array(dc.max_speed, dtype=float), dc.anti_windup * np.asarray(dc.bandwidth, dtype=float),
                 float(config.sample_time), np.zeros(len(STATE_NAMES)))
@@ -271,11 +374,19 @@ def build(vehicle: Vehicle, config: DesignConfig) -> ControllerSpec:
 
 
 def summary(d: Any) -> dict[str, Any]:
-    """The DP law's gains per axis x, y, z, psi (pole placement, Fossen 2011 sec. 12.2) and the
-    mass it is placed with (``rovlab design --json``, the HMI)."""
+    """The DP law's gains per axis x, y, z, psi (pole placement, Fossen 2011 sec. 12.2), the
+    mass it is placed with, the thrust capacity per DOF X, Y, Z, N [N, N m], the bounds of the
+    integral state [m s, rad s] and the known current (NED, m/s) it feeds forward (``rovlab design
+    --json``, the HMI)."""
+    lo, hi = d.integral_limit
     return {"dp": {"axes": list(DP_AXES), "Kp": np.asarray(d.Kp, dtype=float).tolist(),
                    "Ki": np.asarray(d.Ki, dtype=float).tolist(), "Kd": np.asarray(d.Kd, dtype=float).tolist(),
-                   "M": np.asarray(d.M, dtype=float).tolist()}}
+                   "M": np.asarray(d.M, dtype=float).tolist(),
+                   "thrust_min": np.asarray(d.tau_min, dtype=float).tolist(),
+                   "thrust_max": np.asarray(d.tau_max, dtype=float).tolist(),
+                   "integral_min": [float(v) if np.isfinite(v) else None for v in lo],  # None: no integral
+                   "integral_max": [float(v) if np.isfinite(v) else None for v in hi],
+                   "known_current": np.asarray(d.current, dtype=float).tolist()}}
 
 
 def read_dp_table(t: TableReader) -> DPConfig:
