@@ -150,3 +150,34 @@ def test_a_truly_frozen_heading_on_the_real_log_is_caught_within_3_s(capsys, tmp
     stuck = [t[i] for i in range(len(s)) if s[i] == "lost-stuck"]
     assert stuck and 100.0 <= min(stuck) <= 103.0 and max(stuck) < 109.0
     assert s[int(np.searchsorted(t, 112.0))] == "ok"
+
+
+def test_a_jump_in_the_real_heading_is_still_gated(capsys, tmp_path, my_rov):
+    """The repetition stuck check did not blind the gate (issue 27, "an offset/jump still gated"): a
+    single ATTITUDE.yaw sample 20 deg off at t = 150 s is rejected and moves the estimate by less
+    than 0.1 deg; a 20 deg offset from t = 180 to 190 s has its first sample rejected too, and the
+    first after it ends (the samples between are the persistence rule of rovlab.estimation.fusion:
+    with no second heading sensor as a witness, a lasting offset cannot be told from a real turn the
+    model missed, and it is followed)."""
+    from rovlab.io.logreader import read_log
+    from rovlab.io.logwriter import write_csv
+
+    assert run(capsys, "mavlink", "convert", TLOG, "--vehicle", my_rov, "--out", tmp_path / "in.csv")[0] == 0
+    y = read_log(tmp_path / "in.csv")
+    cols = {k: np.array(y[k], dtype=float) for k in y.columns}
+    t = cols["time_s"] - cols["time_s"][0]
+    has = ~np.isnan(cols["psi_imu"])
+    spike = int(np.flatnonzero(has & (t >= 150.0))[0])
+    offset = int(np.flatnonzero(has & (t >= 180.0))[0])
+    cols["psi_imu"][spike] += math.radians(20.0)
+    cols["psi_imu"][offset:] += np.where(t[offset:] < 190.0, math.radians(20.0), 0.0)
+    write_csv(tmp_path / "jump.csv", cols, exact=("time_s",))
+    est = tmp_path / "est.csv"
+    code, out, err = run(capsys, "filter", tmp_path / "jump.csv", "--vehicle", my_rov, "--config", "bluerov2_heavy",
+                         "--out", est)
+    assert code == 0, err
+    # three samples gated: the spike, the offset's first sample and its first after it ends
+    assert "imu.psi          5233 samples, 5230 used, 3 rejected by the gate" in out
+    psi = np.asarray(read_log(est)["est_psi"])
+    for i in (spike, offset):  # the estimate does not jump with the sample: it was not used
+        assert abs(math.degrees(psi[i] - psi[i - 1])) < 0.1, t[i]
