@@ -119,9 +119,16 @@ SAMPLE_TIME_RANGE = (1e-3, 10.0)  # h [s]: 1 kHz .. 0.1 Hz
 BIAS_TIME_PER_MASS_RANGE = (1e-3, 1e5)  # [s/kg]: the thesis uses 100
 BIAS_TIME_RANGE = (0.1, 1e8)  # T_w, T_r [s]
 PSD_RANGE = (0.0, 1e6)  # white-noise spectral densities, SI
-# initial state (and its standard deviation) per file key, in the file's units
-_STATE_RANGES = {"z": (-1e4, 1e4), "psi_deg": (-720.0, 720.0), "w": (-10.0, 10.0), "r_deg_s": (-720.0, 720.0),
-                 "b_w": (-1e4, 1e4), "b_r": (-1e3, 1e3)}
+# Plausible initial states and standard deviations per state key of a design file, in the file's
+# units (the KF's [initial] and a component's initial_state / initial_std tables): the [initial]
+# ranges, extended to the 4-DOF states
+STATE_KEY_RANGES: dict[str, tuple[float, float]] = {
+    "x": (-1e4, 1e4), "y": (-1e4, 1e4), "z": (-1e4, 1e4), "psi_deg": (-720.0, 720.0),
+    "u": (-10.0, 10.0), "v": (-10.0, 10.0), "w": (-10.0, 10.0), "r_deg_s": (-720.0, 720.0),
+    "b_X": (-1e4, 1e4), "b_Y": (-1e4, 1e4), "b_Z": (-1e4, 1e4), "b_N": (-1e3, 1e3),
+    "b_w": (-1e4, 1e4), "b_r": (-1e3, 1e3),
+}
+_STATE_RANGES = {k: STATE_KEY_RANGES[k] for k in _STATE_KEYS}  # the KF's [initial]
 _MODEL_RANGES = {"mass": PLAUSIBLE["mass"], "I_zz": PLAUSIBLE["I_zz"], "Z_wdot": PLAUSIBLE["added_mass"],
                  "N_rdot": PLAUSIBLE["added_mass"], "Z_w": PLAUSIBLE["damping_linear"],
                  "N_r": PLAUSIBLE["damping_linear"]}
@@ -390,14 +397,34 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
     )
 
 
+MAX_TABLE_MAGNITUDE = 1e6  # |value| of a component table's per-key number (SI units or the file's degrees)
+# Issue 28's fuzzing: [ekf] bias_psd = 2e298 overflowed the EKF's discretisation (LinAlgError in
+# simulate) and [dp] bandwidth = 1e300 gave NaN in the demanded wrench; at 1e6 every [ekf] noise
+# density and [dp] bandwidth, reference bandwidth and speed limit still ran finite
+# (dp-station-keeping, 20 s). Physical ranges are the component's own (``plausible``).
+
+
+
 def per_key(t: TableReader, name: str, keys: tuple[str, ...], base: np.ndarray, *, factors: tuple[float, ...] | None = None,
-             positive: bool = False, nonnegative: bool = False, what: str = "") -> np.ndarray:
-    """An inline table of numbers per key (missing keys keep ``base``), times ``factors``."""
+             positive: bool = False, nonnegative: bool = False, what: str = "",
+             plausible: tuple[float, float] | Mapping[str, tuple[float, float]] | None = None) -> np.ndarray:
+    """An inline table of numbers per key (missing keys keep ``base``), times ``factors``.
+
+    Each value (in the file's units, before ``factors``) must lie within ``plausible`` -- one
+    (lo, hi) for every key or one per key (a key it does not list: the magnitude bound) -- and in
+    any case within +-``MAX_TABLE_MAGNITUDE``: a value beyond what any BlueROV-class design can
+    mean is refused here, with the file and key, instead of overflowing in the design or the
+    kernels."""
     out = np.array(base, dtype=float)
     sub = t.table(name, required=False)
     for i, key in enumerate(keys):
         if sub.has(key):
-            out[i] = sub.number(key, positive=positive, nonnegative=nonnegative, what=what) * (
+            bounds = plausible.get(key) if isinstance(plausible, Mapping) else plausible
+            lo, hi = bounds if bounds is not None else (-MAX_TABLE_MAGNITUDE, MAX_TABLE_MAGNITUDE)
+            lo, hi = max(lo, -MAX_TABLE_MAGNITUDE), min(hi, MAX_TABLE_MAGNITUDE)
+            if positive or nonnegative:
+                lo = max(lo, 0.0)
+            out[i] = sub.number(key, positive=positive, nonnegative=nonnegative, plausible=(lo, hi), what=what) * (
                 factors[i] if factors else 1.0)
     sub.finish()
     return out
