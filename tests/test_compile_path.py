@@ -334,3 +334,33 @@ print(json.dumps({"after_compare": after_compare, "after_touch": c.needs_compili
                          timeout=600, cwd=tmp_path, env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")})
     assert res.returncode == 0, res.stderr
     assert json.loads(res.stdout.strip().splitlines()[-1]) == {"after_compare": False, "after_touch": True}
+
+
+def test_rovlab_compile_prepares_a_nodes_control_step_and_the_realtime_plant(capsys):
+    """Issue 28: the first start of a node or bridge compiled for minutes with no word after the
+    first line. `rovlab compile --node --realtime` prepares both ahead, for the bridge's defaults or
+    a named vehicle and configuration."""
+    from rovlab.interfaces.cli import main
+
+    assert main(["compile", "--node", "--vehicle", "udrone", "--config", "thesis", "--realtime"]) == 0
+    out = capsys.readouterr().out
+    assert "node control step kf + lqg (thesis)" in out
+    assert "plant of bluerov2-heavy-step" in out and "plant of step-observer-model" in out and "ready in" in out
+    assert main(["compile", "--node", "--config", "no-such-config"]) == 2
+
+
+def test_a_long_first_call_reports_its_progress_and_leaves_no_thread():
+    import threading
+    import time
+
+    from rovlab._jit import with_progress
+
+    lines: list[str] = []
+    result, seconds = with_progress(lambda: time.sleep(0.5) or 42, lines.append, "the test kernel",
+                                    after_s=0.05, every_s=0.1, hint="; a hint")
+    assert result == 42 and seconds >= 0.5
+    assert lines[0].startswith("compiling the test kernel") and "; a hint" in lines[0]
+    assert any("still compiling the test kernel" in line for line in lines[1:])
+    assert not any(t.name == "rovlab-compile-progress" for t in threading.enumerate())
+    quiet: list[str] = []
+    assert with_progress(lambda: 1, quiet.append, "a cached kernel")[0] == 1 and quiet == []

@@ -243,6 +243,34 @@ class _PlainModule:
 _plain: dict[Any, Any] = {}
 
 
+def with_progress(work: Callable[[], Any], log: Callable[[str], None], what: str, *, after_s: float = 1.0,
+                  every_s: float = 15.0, hint: str = "") -> tuple[Any, float]:
+    """Run ``work()`` (a first call that may compile) and return (its result, seconds). When it
+    takes longer than ``after_s``, ``log`` says that ``what`` is being compiled (with ``hint``),
+    then the elapsed time every ``every_s`` seconds until it is done, so that a first start on a
+    loaded machine does not look like a hang. The reporting thread ends before this returns."""
+    import time
+
+    done = threading.Event()
+    started = time.perf_counter()
+
+    def report() -> None:
+        if done.wait(after_s):
+            return
+        log(f"compiling {what} (a first run on this machine; numba caches it for later runs){hint} ...")
+        while not done.wait(every_s):
+            log(f"  ... still compiling {what}: {time.perf_counter() - started:.0f} s")
+
+    thread = threading.Thread(target=report, name="rovlab-compile-progress", daemon=True)
+    thread.start()
+    try:
+        result = work()
+    finally:
+        done.set()
+        thread.join()
+    return result, time.perf_counter() - started
+
+
 def loop_key(plant: str, estimator: str, controller: str) -> str:
     """The name of one combination of components (one compiled loop), e.g. "process-kf-lqg"."""
     return f"{plant}-{estimator}-{controller}"

@@ -103,3 +103,24 @@ def test_hmi_source_on_a_running_ros2_node(ros2):
     assert r["sensors_after"]["z_pressure"] == "disabled" or r["sensors_after"]["z_pressure"].startswith("lost")
     assert r["sensors_after"]["psi_qualisys"] == "off"
     assert r["node_alive"] and r["node_exit"] == 0
+
+
+_LONELY = """
+import json, os, subprocess, sys, time
+t = time.monotonic()
+rovlab = os.path.join(os.path.dirname(sys.executable), "rovlab")
+p = subprocess.run([rovlab, "ros2", "sim", "--duration", "1", "--wait-limit", "20"],
+                   capture_output=True, text=True, timeout=600)
+print("RESULT " + json.dumps({"rc": p.returncode, "err": p.stderr + p.stdout, "s": time.monotonic() - t}))
+"""
+
+
+def test_a_simulator_without_a_node_waits_says_so_and_gives_up(ros2):
+    """Issue 28: a simulator whose node never came used to run out its --duration while waiting and
+    exit 0 without a word. Now --duration counts from the vehicle's start, the wait is reported every
+    15 s (a node's first start compiles), and after --wait-limit it gives up: exit 1, saying why."""
+    r = run_isolated([str(ROS2_PY), "-c", _LONELY], timeout=900, tmp=ros2)
+    assert r["rc"] == 1, r["err"]
+    assert r["s"] >= 20.0, r["err"]  # not stopped by --duration 1 while it waited
+    assert "waiting for a node" in r["err"] and "rovlab compile --node" in r["err"]
+    assert "never started" in r["err"]

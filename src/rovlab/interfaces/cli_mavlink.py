@@ -217,20 +217,12 @@ def _parse_home(text: str) -> tuple[float, float, float] | None:
 
 def _compile_announced(vsim: Any, log: Any) -> None:
     """Compile the simulated vehicle's plant before anything is sent (a ground station that sees a
-    HEARTBEAT and then nothing declares the link lost); say so when it takes a while."""
-    import threading
+    HEARTBEAT and then nothing declares the link lost); say so, with the elapsed time, when it
+    takes a while."""
+    from rovlab._jit import with_progress
 
-    done = threading.Event()
-
-    def announce() -> None:
-        if not done.wait(1.0):
-            log("compiling the simulated vehicle's plant (once per machine: numba caches it) ...")
-
-    t = threading.Thread(target=announce, daemon=True)
-    t.start()
-    seconds = vsim.compile()
-    done.set()
-    t.join()
+    _, seconds = with_progress(vsim.compile, log, "the simulated vehicle's plant",
+                               hint="; `rovlab compile --realtime` prepares it ahead")
     if seconds > 1.0:
         log(f"compiled the simulated vehicle's plant in {seconds:.1f} s")
 

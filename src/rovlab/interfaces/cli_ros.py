@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -31,7 +32,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         s.add_argument("--namespace", default="", help="namespace of the topics (default: none)")
         s.add_argument("--no-setpoints", action="store_true",
                        help="do not publish the scenario's reference schedule on NS/setpoint")
-        s.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+        s.add_argument("--duration", type=float, default=None,
+                       help="stop after the vehicle has run this many seconds (counted from its start: the time "
+                            "spent waiting for a node is not counted)")
+        s.add_argument("--wait-limit", type=float, default=900.0, metavar="S",
+                       help="give up (exit status 1) when no node has listened and commanded for this many seconds "
+                            "(default 900: a node's first start on a slow machine compiles for minutes)")
         s.add_argument("--remap", action="append", default=[], metavar="FROM:=TO",
                        help="remap a topic (repeatable)")
         s.add_argument("--no-wait", action="store_true",
@@ -81,8 +87,11 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be > 0 s, got {args.duration}")
+    if not args.wait_limit > 0 or not math.isfinite(args.wait_limit):
+        raise UserError(f"--wait-limit must be a positive number of seconds, got {args.wait_limit}")
     remaps = _remaps(args)
     mod = _adapter(args.ros, args.namespace)
     return int(mod.run_sim(vehicle=args.vehicle, scenario=args.scenario, namespace=args.namespace,
                            setpoints=not args.no_setpoints, duration_s=args.duration, wait=not args.no_wait,
+                           wait_limit_s=args.wait_limit,
                            remaps=remaps))

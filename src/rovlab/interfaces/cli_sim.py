@@ -31,7 +31,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                                       "compiles ahead or in the background.")
     comp.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="packaged scenario names or TOML paths")
     comp.add_argument("--all", action="store_true",
-                      help="every combination the packaged scenarios run (and rovlab compare's MRAC and LQG)")
+                      help="every combination the packaged scenarios run (and rovlab compare's MRAC and LQG), the "
+                           "control step of every packaged configuration and the real-time simulated vehicle")
+    comp.add_argument("--node", action="store_true",
+                      help="the control step a vehicle node runs (rovlab ros2/ros1 node, rovlab mavlink bridge, the "
+                           "HMI on a live source) for --vehicle and --config")
+    comp.add_argument("--vehicle", default="bluerov2_heavy",
+                      help="with --node: vehicle name or TOML file (default bluerov2_heavy, the bridge's)")
+    comp.add_argument("--config", default="bluerov2_heavy",
+                      help="with --node: configuration name or TOML file (default bluerov2_heavy, the bridge's)")
+    comp.add_argument("--realtime", action="store_true",
+                      help="the plant of the real-time simulated vehicle (rovlab mavlink sim, rovlab ros2/ros1 sim)")
     comp.set_defaults(func=_cmd_compile)
 
     lst = sub.add_parser("scenarios", help="list the packaged scenarios")
@@ -62,15 +72,24 @@ def _cmd_compile(args: argparse.Namespace) -> int:
     from rovlab.sim.runner import compile_loop, shipped_components
     from rovlab.sim.scenario import load_scenario_data, packaged_scenario_names
 
-    if bool(args.scenarios) == bool(args.all):
+    if args.all and args.scenarios:
         raise UserError("name the scenarios to compile, or --all (not both)")
+    if not (args.scenarios or args.all or args.node or args.realtime):
+        raise UserError("name the scenarios to compile, or --all, --node or --realtime")
+    total = time.perf_counter()
+    if args.node or args.all:
+        _compile_node_steps(args)
+    if args.realtime or args.all:
+        _compile_realtime()
+    if not (args.scenarios or args.all):
+        print(f"ready in {time.perf_counter() - total:.1f} s")
+        return 0
     jobs: list[tuple[str, str | None]] = [(name, None) for name in args.scenarios]
     if args.all:
         jobs = [(name, None) for name in packaged_scenario_names()]
         jobs += [(name, c) for name in _COMPARISONS for c in ("lqg", "mrac")]
     loaded = [(ref, controller, *load_scenario_data(ref)) for ref, controller in jobs]  # every file checked first
     seen: set[str] = set()
-    total = time.perf_counter()
     for ref, controller, data, file in loaded:
         prep = prepare({**data, "controller": controller} if controller else data, file=file)
         key = prep.loop_key
@@ -90,6 +109,41 @@ def _cmd_compile(args: argparse.Namespace) -> int:
             raise UserError(f"{ref}: {exc}") from None
     print(f"{len(seen)} loop{'s' if len(seen) != 1 else ''} ready in {time.perf_counter() - total:.1f} s")
     return 0
+
+
+def _compile_node_steps(args: argparse.Namespace) -> None:
+    """The control step of NodeCore for --vehicle/--config (with --all: of every packaged
+    configuration's estimator and controller), compiled into numba's cache by building the node."""
+    from rovlab.interfaces.node.core import NodeCore
+    from rovlab.params.design import load_design_config, packaged_config_names
+    from rovlab.params.vehicle import load_vehicle
+
+    pairs = [(args.vehicle, args.config)] if args.node else []
+    if args.all:
+        pairs += [(args.vehicle, name) for name in packaged_config_names()]
+    seen: set[tuple[str, str]] = set()
+    for vehicle, config in pairs:
+        v, c = load_vehicle(vehicle), load_design_config(config)
+        key = (c.estimator, c.controller)
+        if key in seen:
+            continue
+        seen.add(key)
+        started = time.perf_counter()
+        print(f"node control step {c.estimator} + {c.controller} ({c.name}) ...", end="", flush=True)
+        NodeCore(v, c, log=lambda msg: print(f"\n  {msg}", end="", flush=True))
+        print(f" {time.perf_counter() - started:.1f} s")
+
+
+def _compile_realtime() -> None:
+    """The real-time simulated vehicle's plant (rovlab.sim.realtime), for both plant kinds' scenarios
+    the simulators default to."""
+    from rovlab.sim.realtime import SimulatedVehicle
+
+    for scenario in ("bluerov2-heavy-step", "step-observer-model"):  # the process plant, the observer plant
+        started = time.perf_counter()
+        print(f"real-time simulated vehicle, plant of {scenario} ...", end="", flush=True)
+        SimulatedVehicle(scenario).compile()
+        print(f" {time.perf_counter() - started:.1f} s")
 
 
 def _check_counts(args: argparse.Namespace) -> None:

@@ -63,7 +63,6 @@ from __future__ import annotations
 import math
 import sys
 import threading
-import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -480,20 +479,26 @@ class NodeCore:
         kernel = control_step_for(est, ctl)
         key = (type(est), type(ctl))
         if key not in _COMPILED:
-            started = time.perf_counter()
-            self._log(f"rovlab node: preparing the compiled control step ({type(est).__name__} + "
-                      f"{type(ctl).__name__}); the first run on a machine compiles it (up to ~30 s), "
-                      "later runs load it from the cache ...")
+            from rovlab._jit import with_progress
+
             # warm-up on copies, with no samples: the running state is not touched
             ew, cw = fresh(est), fresh(ctl)
             nav_of = np.array([TRUTH_INDEX[q] for q in design.estimator.nav], dtype=np.int64)
-            with explain_allocation((est, ctl)):
-                kernel(0.0, ew, cw, act, nav_of, np.full(m, np.nan), np.zeros(m, dtype=np.bool_), np.zeros(4), True,
-                       StepOut(np.empty((m, N_REP)), np.zeros(N_TRUTH), np.zeros(4), np.zeros(4), np.zeros(4),
-                               np.empty(len(alloc.bank.names)), np.empty(n), np.empty((n, n)), np.empty(cw.state.shape[0])),
-                       False)
+
+            def warm_up() -> None:
+                with explain_allocation((est, ctl)):
+                    kernel(0.0, ew, cw, act, nav_of, np.full(m, np.nan), np.zeros(m, dtype=np.bool_), np.zeros(4),
+                           True, StepOut(np.empty((m, N_REP)), np.zeros(N_TRUTH), np.zeros(4), np.zeros(4),
+                                         np.zeros(4), np.empty(len(alloc.bank.names)), np.empty(n), np.empty((n, n)),
+                                         np.empty(cw.state.shape[0])),
+                           False)
+
+            what = f"the control step ({type(est).__name__} + {type(ctl).__name__})"
+            _, seconds = with_progress(warm_up, self._log, what,
+                                       hint="; `rovlab compile --node` prepares it ahead")
             _COMPILED.add(key)
-            self._log(f"rovlab node: control step ready ({time.perf_counter() - started:.1f} s)")
+            if seconds > 1.0:
+                self._log(f"rovlab node: {what} ready ({seconds:.1f} s)")
         self.design = design
         self.estimator, self.controller, self.actuators = est, ctl, act
         self.channels = channels

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import signal
+import sys
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -168,8 +169,9 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
 class SimNode1(_Ros1, rc.SimAdapter):
     """A SimulatedVehicle on ROS 1 topics, paced by a rospy timer."""
 
-    def __init__(self, sim: Any, *, setpoints: bool = True, wait: bool = True) -> None:
-        self.setup(sim)
+    def __init__(self, sim: Any, *, setpoints: bool = True, wait: bool = True, duration_s: float | None = None,
+                 wait_limit_s: float = 900.0) -> None:
+        self.setup(sim, duration_s=duration_s, wait_limit_s=wait_limit_s)
         self.waiting = wait
         self.warn = rc.Throttle(rospy.logwarn)
         self.info = rospy.loginfo
@@ -197,6 +199,8 @@ class SimNode1(_Ros1, rc.SimAdapter):
             if self.pub_p.get_num_connections() + self.pub_m.get_num_connections() == 0 \
                     or self.sub.get_num_connections() == 0 \
                     or (self.pub_s is not None and self.pub_s.get_num_connections() == 0):
+                if self.note_waiting(now):  # no node came: give up (run_sim says so and exits 1)
+                    signal.raise_signal(signal.SIGTERM)
                 return
             if self.ready_at is None:
                 self.ready_at = now
@@ -204,6 +208,9 @@ class SimNode1(_Ros1, rc.SimAdapter):
                 return
             self.waiting = False
             rospy.loginfo("a node is listening and commanding: the simulated vehicle starts")
+        if self.started(now):  # --duration counts from the start, not while waiting for a node
+            signal.raise_signal(signal.SIGTERM)
+            return
         if self.t0 is None:
             self.t0 = now
         due = int((now - self.t0) / self.sim.h + 1e-9) + 1 - self.sim.k  # made up when held up (see ros2.py)
@@ -215,14 +222,24 @@ class SimNode1(_Ros1, rc.SimAdapter):
 
 
 def run_sim(*, vehicle: str | None, scenario: str, namespace: str = "", setpoints: bool = True,
-            duration_s: float | None = None, wait: bool = True, remaps: list[str] | None = None) -> int:
-    """``rovlab ros1 sim``."""
+            duration_s: float | None = None, wait: bool = True, remaps: list[str] | None = None,
+            wait_limit_s: float = 900.0) -> int:
+    """``rovlab ros1 sim`` (1 when no node came within ``wait_limit_s``)."""
+    from rovlab._jit import with_progress
     from rovlab.interfaces.node.runtime import load_sim
 
     sim = load_sim(scenario, vehicle)
+    # the plant compiled before the vehicle is announced (a first step would otherwise stall its clock)
+    with_progress(sim.compile, lambda msg: print(f"rovlab sim: {msg}", file=sys.stderr, flush=True),
+                  "the simulated vehicle's plant", hint="; `rovlab compile --realtime` prepares it ahead")
     _init("rovlab_sim", namespace, remaps)
-    SimNode1(sim, setpoints=setpoints, wait=wait)
+    sn = SimNode1(sim, setpoints=setpoints, wait=wait, duration_s=duration_s, wait_limit_s=wait_limit_s)
     rospy.loginfo(f"rovlab sim up (ROS 1): scenario {sim.scenario.name}, h = {sim.h:g} s")
-    if duration_s is not None:
-        threading.Timer(duration_s, lambda: signal.raise_signal(signal.SIGTERM)).start()
-    return _spin()
+
+    def on_exit() -> None:
+        note = sn.exit_note()
+        if note:  # rospy has shut down: straight to stderr
+            print(f"rovlab sim: {note}", file=sys.stderr, flush=True)
+
+    _spin(on_exit)
+    return 0 if sn.started_at is not None else 1

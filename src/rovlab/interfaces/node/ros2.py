@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import signal
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -196,8 +197,8 @@ class SimNode(_Ros2, rc.SimAdapter):
     """A SimulatedVehicle on ROS 2 topics, paced by a wall-clock timer."""
 
     def __init__(self, sim: Any, *, namespace: str = "", setpoints: bool = True, wait: bool = True,
-                 node_name: str = "rovlab_sim") -> None:
-        self.setup(sim)
+                 node_name: str = "rovlab_sim", duration_s: float | None = None, wait_limit_s: float = 900.0) -> None:
+        self.setup(sim, duration_s=duration_s, wait_limit_s=wait_limit_s)
         self.waiting = wait
         self.node = node = Node(node_name, namespace=namespace)
         self.warn = rc.Throttle(node.get_logger().warning)
@@ -219,6 +220,8 @@ class SimNode(_Ros2, rc.SimAdapter):
             if n.count_subscribers(rc.TOPICS["pressure"]) + n.count_subscribers(rc.TOPICS["mocap"]) == 0 \
                     or n.count_publishers(rc.TOPICS["pwm"]) == 0 \
                     or (self.pub_s is not None and n.count_subscribers(rc.TOPICS["setpoint"]) == 0):
+                if self.note_waiting(now):  # no node came: give up (run_sim says so and exits 1)
+                    signal.raise_signal(signal.SIGTERM)
                 return
             if self.ready_at is None:  # discovered: give the connections a moment to match
                 self.ready_at = now
@@ -226,6 +229,9 @@ class SimNode(_Ros2, rc.SimAdapter):
                 return
             self.waiting = False
             n.get_logger().info("a node is listening and commanding: the simulated vehicle starts")
+        if self.started(now):  # --duration counts from the start, not while waiting for a node
+            signal.raise_signal(signal.SIGTERM)
+            return
         if self.t0 is None:
             self.t0 = now
         # the simulated time follows the clock: steps missed while the process was held up are
@@ -239,15 +245,26 @@ class SimNode(_Ros2, rc.SimAdapter):
 
 
 def run_sim(*, vehicle: str | None, scenario: str, namespace: str = "", setpoints: bool = True,
-            duration_s: float | None = None, wait: bool = True, remaps: list[str] | None = None) -> int:
-    """``rovlab ros2 sim``."""
+            duration_s: float | None = None, wait: bool = True, remaps: list[str] | None = None,
+            wait_limit_s: float = 900.0) -> int:
+    """``rovlab ros2 sim`` (1 when no node came within ``wait_limit_s``)."""
+    from rovlab._jit import with_progress
     from rovlab.interfaces.node.runtime import load_sim
 
     sim = load_sim(scenario, vehicle)
+    # the plant compiled before the vehicle is announced (a first step would otherwise stall its clock)
+    with_progress(sim.compile, lambda msg: print(f"rovlab sim: {msg}", file=sys.stderr, flush=True),
+                  "the simulated vehicle's plant", hint="; `rovlab compile --realtime` prepares it ahead")
     rclpy.init(args=_ros_args(remaps), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    sn = SimNode(sim, namespace=namespace, setpoints=setpoints, wait=wait)
+    sn = SimNode(sim, namespace=namespace, setpoints=setpoints, wait=wait, duration_s=duration_s,
+                 wait_limit_s=wait_limit_s)
     sn.node.get_logger().info(f"rovlab sim up: scenario {sim.scenario.name}, vehicle {sim.prep.truth.name}, "
                               f"h = {sim.h:g} s; publishing " + ", ".join(c.name for c in sim.channels))
-    if duration_s is not None:
-        sn.node.create_timer(duration_s, lambda: signal.raise_signal(signal.SIGTERM))
-    return _spin(sn.node)
+
+    def on_exit() -> None:
+        note = sn.exit_note()
+        if note:
+            sn.node.get_logger().warning(note)
+
+    _spin(sn.node, on_exit)
+    return 0 if sn.started_at is not None else 1

@@ -542,12 +542,50 @@ class SimAdapter(RosAdapter):
     pub_t: Any
     pub_s: Any
 
-    def setup(self, sim: Any) -> None:
+    WAIT_NOTE_EVERY_S = 15.0
+
+    def setup(self, sim: Any, *, duration_s: float | None = None, wait_limit_s: float = 900.0) -> None:
         self.sim = sim
         truth = sim.prep.truth
         self.rho, self.g = truth.water_density, truth.gravity
         self.last_ref: tuple[float, float] | None = None
         self.last_ref_time = -1e9
+        self.duration_s = duration_s  # simulated seconds after the vehicle starts (None: until stopped)
+        self.started_at: float | None = None
+        self.wait_limit_s = wait_limit_s  # give up when no node came for this long
+        self.wait_since: float | None = None
+        self.last_wait_s = 0.0
+        self._next_wait_note = 0.0
+
+    def note_waiting(self, now: float) -> bool:
+        """Say, every WAIT_NOTE_EVERY_S, that the vehicle waits for a node (so a node that is still
+        compiling on its first start does not look like a broken link); True once it has waited
+        ``wait_limit_s`` (time to give up)."""
+        if self.wait_since is None:
+            self.wait_since = now
+            self._next_wait_note = now + self.WAIT_NOTE_EVERY_S
+        self.last_wait_s = now - self.wait_since
+        if now >= self._next_wait_note:
+            self._next_wait_note = now + self.WAIT_NOTE_EVERY_S
+            self.info(f"waiting for a node to listen to the sensors and command the thrusters "
+                      f"({now - self.wait_since:.0f} s; a node's first start on a machine compiles its control "
+                      "step: `rovlab compile --node` prepares it ahead)")
+        return now - self.wait_since >= self.wait_limit_s
+
+    def started(self, now: float) -> bool:
+        """Mark the vehicle started (first call); whether its --duration has run out."""
+        if self.started_at is None:
+            self.started_at = now
+        return self.duration_s is not None and now - self.started_at >= self.duration_s
+
+    def exit_note(self) -> str | None:
+        """What to say at exit when the vehicle never started (None when it did)."""
+        if self.started_at is not None:
+            return None
+        waited = "" if self.wait_since is None else f" in {self.last_wait_s:.0f} s"
+        return (f"the simulated vehicle never started: no node listened to its sensors and commanded its thrusters{waited} "
+                "(is `rovlab ros2/ros1 node` running in the same namespace? its first start compiles: "
+                "`rovlab compile --node` prepares it ahead)")
 
     def publish_step(self, s: Any, now: float) -> None:
         m = self.msgs
