@@ -311,3 +311,29 @@ def test_rovlab_filter_replays_a_node_recording(tmp_path, capsys):
     np.testing.assert_allclose(est.data["est_z"], node["est_z"], atol=1e-9)
     np.testing.assert_allclose(est.data["est_psi"], node["est_psi"], atol=1e-9)
     assert "filtered 80 samples" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("vehicle, config, dp", [("udrone_dvl", "udrone_dp", True), ("udrone", "default", False)])
+def test_a_setpoints_position_reaches_a_dp_controller_and_is_said_unused_otherwise(vehicle, config, dp):
+    """Issue 28: the ROS nodes used the depth and heading of a set-point and dropped x/y without a
+    word. A controller declares the set-points it acts on (ComponentInfo.references): DP gets the
+    position too; depth-and-heading control says, at the first set-point, that x and y are not used.
+    Engaged by depth and heading alone (the bridge, the HMI), DP holds the estimated position
+    instead of driving to the origin."""
+    core = NodeCore(load_vehicle(vehicle), load_design_config(config), log=lambda m: None)
+    assert ("x" in core.references) is dp
+    said: list[str] = []
+    adapter = SimpleNamespace(core=core, info=said.append)
+    rc.VehicleAdapter.on_setpoint(adapter, SimpleNamespace(pose=_pose(x=3.0, y=4.0, z=-1.5,
+                                                                 q=frames.heading_quaternion(0.4))))
+    ref = core.reference
+    assert ref[2:] == pytest.approx([1.5, 0.4])
+    if dp:
+        assert ref[:2] == pytest.approx([4.0, 3.0])  # ENU (3, 4) -> NED north 4, east 3
+        assert "north 4 m, east 3 m" in said[0]
+    else:
+        assert "x and y are not used" in said[0]
+    held = NodeCore(load_vehicle(vehicle), load_design_config(config), log=lambda m: None)
+    held._nav[:2] = (2.5, -1.0)  # what the filter estimates when the controller is engaged
+    held.set_reference(z=1.0)
+    assert held.reference[:2] == pytest.approx([2.5, -1.0] if dp else [0.0, 0.0])

@@ -224,6 +224,15 @@ class NodeCore:
         return self._names[1] or self.config.controller
 
     @property
+    def references(self) -> tuple[str, ...]:
+        """The set-points the controller acts on (rovlab.core.components.ComponentInfo.references:
+        z and psi, or x, y, z and psi for dynamic positioning)."""
+        from rovlab.core.components import component
+
+        info = component("controller", self.controller_name)
+        return info.references if info is not None else ("z", "psi")
+
+    @property
     def estimator_name(self) -> str:
         return self._names[0] or self.config.estimator
 
@@ -291,6 +300,10 @@ class NodeCore:
                 new[2] = max(0.0, float(self._nav[TRUTH_INDEX["z"]]))  # hold the estimated depth
             if not self.engaged and psi is None:
                 new[3] = float(self._nav[TRUTH_INDEX["psi"]])
+            if not self.engaged and x is None and "x" in self.references:  # DP engaged with depth and
+                new[0] = float(self._nav[TRUTH_INDEX["x"]])  # heading only: hold the estimated position,
+            if not self.engaged and y is None and "y" in self.references:  # not drive to the origin
+                new[1] = float(self._nav[TRUTH_INDEX["y"]])
             self.reference = new
             self.engaged = True
 

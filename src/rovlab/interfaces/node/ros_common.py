@@ -13,7 +13,7 @@ topic                  type                                        direction (no
 pressure               sensor_msgs/FluidPressure [Pa]              in  (best effort)
 mocap/pose             geometry_msgs/PoseStamped (or ...WithCovar.) in  (best effort)
 imu                    sensor_msgs/Imu                             in  (best effort)
-setpoint               geometry_msgs/PoseStamped (depth, heading)  in  (reliable)
+setpoint               geometry_msgs/PoseStamped (depth, heading)  in  (reliable; x, y too for DP)
 odometry               nav_msgs/Odometry, covariance of the filter out (reliable)
 wrench                 geometry_msgs/WrenchStamped (demanded)      out (reliable)
 thrusters/pwm_us       std_msgs/Float64MultiArray (vehicle order)  out (reliable)
@@ -500,9 +500,17 @@ class VehicleAdapter(RosAdapter):
         if s["z"] < 0.0:
             raise MessageError(f"setpoint depth {s['z']:g} m (ENU z = {-s['z']:g}) is above the surface")
         engaged = self.core.engaged
+        if "x" in self.core.references:  # dynamic positioning: the set-point's position too
+            self.core.set_reference(x=s["x"], y=s["y"], z=s["z"], psi=s["psi"])
+            if not engaged:
+                self.info(f"first set-point: north {s['x']:g} m, east {s['y']:g} m, depth {s['z']:g} m, heading "
+                          f"{s['psi']:g} rad; controller {self.core.controller_name} engaged")
+            return
         self.core.set_reference(z=s["z"], psi=s["psi"])
         if not engaged:
-            self.info(f"first set-point: depth {s['z']:g} m, heading {s['psi']:g} rad; controller engaged")
+            self.info(f"first set-point: depth {s['z']:g} m, heading {s['psi']:g} rad; controller "
+                      f"{self.core.controller_name} engaged (it holds depth and heading: the set-point's x and y "
+                      "are not used; a configuration with controller = \"dp\" holds a position)")
 
     def run(self, now: float) -> None:
         outs = self.core.tick(now)
