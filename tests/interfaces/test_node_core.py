@@ -306,3 +306,20 @@ def test_a_flood_of_samples_for_one_step_keeps_the_newest(udrone):
     assert core.counters["replaced"] == 6 and core.counters["extra_corrections"] == 3
     with pytest.raises(ValueError, match="max_queue"):
         NodeCore(*udrone, log=lambda msg: None, max_queue=0)
+
+
+def test_a_late_sample_is_replaced_by_a_newer_one_not_fused_a_period_late(udrone):
+    """A sample that arrived after its step ran is used at the next step only when no newer sample
+    of its channel came (the real-time ROS nodes under load); samples of one period are all used."""
+    core = NodeCore(*udrone, log=lambda msg: None)
+    h = core.h
+    _sample_all(core, 0)
+    core.tick(0.0)
+    c = core.channels[0]
+    assert core.push(c.sensor, c.quantity, 0.5 + c.offset, 1 * h) == "accepted"  # step 1, not yet run
+    core.tick(1 * h + core.collect_s + 1e-9)  # step 1 runs with it
+    assert core.push(c.sensor, c.quantity, 0.5 + c.offset, 1.2 * h) == "accepted"  # late: period 1 ran
+    assert core.push(c.sensor, c.quantity, 0.5 + c.offset, 2 * h) == "accepted"
+    before = core.counters["extra_corrections"]
+    core.tick(2 * h + core.collect_s + 1e-9)
+    assert core.counters["replaced"] == 1 and core.counters["extra_corrections"] == before

@@ -29,11 +29,13 @@ before its sensors does not dead-reckon (and time its sensors out) before they e
 
 **Samples.** A sample belongs to the step nearest its stamp, and every sample is used, at any
 rate: a step corrects the filter with the newest sample of each channel that belongs to it (or to
-an earlier step), and, before that, with the older ones of a channel that sent several in one
-period (a 20 Hz heading at h = 0.1 s), one after another in the order of their stamps (several
-channels in one correction as long as none repeats) -- as the offline filter fuses several rows
-of one period (rovlab.estimation.streaming), so a live node and ``rovlab filter`` on its
-recording use the same samples. What can happen to a sample is returned by :meth:`push` and
+an earlier step), and, before that, with the older ones of a channel that sent several in the
+same period (a 20 Hz heading at h = 0.1 s), one after another in the order of their stamps
+(several channels in one correction as long as none repeats) -- as the offline filter fuses
+several rows of one period (rovlab.estimation.streaming), so a live node and ``rovlab filter`` on
+its recording use the same samples. A sample of an earlier period that arrived after its step
+ran is used at the next step only if no newer sample of its channel came (else ``replaced``: it
+would be fused a period late). What can happen to a sample is returned by :meth:`push` and
 counted in :attr:`counters`:
 
 * ``accepted``: stored for its step (at most ``max_queue`` samples of a channel wait for one
@@ -405,7 +407,12 @@ class NodeCore:
                 due.append(queue.popleft())
             if due:
                 newest[j] = due[-1][0]
-                older.extend((stamp, j, v) for v, stamp, _ in due[:-1])
+                period = due[-1][2]
+                for v, stamp, step in due[:-1]:
+                    if step == period:  # several samples of one period: each is used
+                        older.append((stamp, j, v))
+                    else:  # a sample of an earlier period that came after its step ran: the newer one
+                        self.counters["replaced"] += 1  # replaces it (fusing it now would date it h late)
         if older:  # several samples of a channel in this period: the older ones first, in stamp order
             older.sort()
             group: dict[int, float] = {}
