@@ -18,6 +18,7 @@ def test_the_dp_scenario_describes_itself_as_a_position_controller(dp_session):
     assert desc["controller"] == "dp"
     assert desc["states"][:4] == ["x", "y", "z", "psi"]
     assert "x_d" in desc["controller_states"]
+    assert desc["references"] == ["x", "y", "z", "psi"]  # the page shows north/east fields for these
 
 
 def test_north_east_set_points_reach_the_loop_and_are_published(dp_session):

@@ -310,3 +310,31 @@ def test_a_burst_of_commands_from_one_client_does_not_freeze_the_others(session)
             await client.close()
 
     asyncio.run(asyncio.wait_for(main(), 120))
+
+
+def test_absurd_set_points_get_an_error_frame_naming_the_field(session):
+    # issue 28: a heading of 1e308 deg became -95.7 deg; a depth of -5 m was an "internal error"
+    async def main():
+        _, client = await _client(session)
+        try:
+            ws = await client.ws_connect("/ws")
+            await _next(ws, "hello")
+            cases = [('"heading_deg": 1e308', "heading_deg", "within -720 .. 720 deg"),
+                     ('"heading_deg": 1e400', "heading_deg", "finite number, got inf"),  # JSON's 1e400 is inf
+                     ('"heading_deg": NaN', "heading_deg", "finite number, got nan"),
+                     ('"heading_deg": "north"', "heading_deg", "finite number, got 'north'"),
+                     ('"depth_m": -5', "depth_m", "within 0 .. 1000 m"),
+                     ('"north_m": 2', "north_m", "holds z, psi only")]
+            for i, (args, key, words) in enumerate(cases):
+                await ws.send_str(f'{{"cmd": "reference", "id": {i}, {args}}}')
+                err = await _next(ws, "error")
+                assert (err["id"], err["key"]) == (i, key) and words in err["message"], err
+                assert "internal error" not in err["message"]
+            state = await (await client.get("/api/state")).json()
+            assert state["reference"]["schedule"] is True  # the scenario's reference, untouched
+            assert state["reference"]["heading_deg"] == pytest.approx(30.0)
+            await ws.close()
+        finally:
+            await client.close()
+
+    run(main())

@@ -259,3 +259,70 @@ def test_step_accepts_up_to_its_bound(session):
     session.handle({"cmd": "pause"})
     out = session.handle({"cmd": "step", "n": MAX_STEPS_PER_COMMAND})
     assert out.messages
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 28: set-points a new user and a fuzzer typed
+# --------------------------------------------------------------------------------------------
+
+def _reference_now(session):
+    return session.state()["reference"], session.source.sim.reference, session.source.sim.reference_xy
+
+
+@pytest.mark.parametrize("heading", [1e308, -1e308, 721.0, 9000.0])
+def test_an_absurd_heading_is_refused_not_wrapped(session, heading):
+    # 1e308 deg used to become -95.7 deg (math.remainder of a number whose every digit below 1e292
+    # is lost); 9000 (90 deg in MAVLink's centidegrees) would wrap to 0 deg without a word
+    before = _reference_now(session)
+    err = _refused(session, {"cmd": "reference", "depth_m": 0.4, "heading_deg": heading})
+    assert err.key == "heading_deg" and "heading_deg must be within -720 .. 720 deg" in err.message
+    assert _reference_now(session) == before  # the depth given with it is not applied either
+
+
+@pytest.mark.parametrize("heading, wrapped", [(370.0, 10.0), (-720.0, 0.0), (720.0, 0.0), (540.0, 180.0),
+                                              (-190.0, 170.0)])
+def test_a_heading_past_a_turn_is_wrapped(session, heading, wrapped):
+    session.handle({"cmd": "reference", "heading_deg": heading})
+    assert abs(session.state()["reference"]["heading_deg"]) == pytest.approx(abs(wrapped), abs=1e-12)
+    assert math.cos(session.source.sim.reference[1] - math.radians(wrapped)) == pytest.approx(1.0)
+
+
+def test_a_depth_above_the_surface_is_refused_with_a_message_not_an_internal_error(session):
+    # -5 m passed the session's old -100 .. 1000 m range and the simulation's own check raised a
+    # ValueError, which the server reported as an internal error
+    before = _reference_now(session)
+    err = _refused(session, {"cmd": "reference", "depth_m": -5})
+    assert err.key == "depth_m" and "0 .. 1000 m" in err.message and "got -5" in err.message
+    assert _reference_now(session) == before
+    session.handle({"cmd": "reference", "depth_m": 0})  # the surface itself is a depth
+    assert session.source.sim.reference[0] == 0.0
+
+
+def test_a_position_set_point_is_refused_when_the_controller_holds_depth_and_heading_only(session):
+    # it used to be accepted and dropped: the LQG holds z and psi, north/east went nowhere
+    assert session.source.describe()["references"] == ["z", "psi"]
+    before = _reference_now(session)
+    for command in ({"cmd": "reference", "north_m": 1.0}, {"cmd": "reference", "east_m": -2.0, "depth_m": 0.5}):
+        err = _refused(session, command)
+        assert err.key in ("north_m", "east_m") and "'lqg' holds z, psi only" in err.message
+        assert _reference_now(session) == before
+
+
+def test_a_sources_own_refusal_is_a_message_naming_the_field(session, monkeypatch):
+    # a vehicle bridge's source says nothing about its references and raises ValueError itself
+    describe = session.source.describe
+    monkeypatch.setattr(session.source, "describe", lambda: {k: v for k, v in describe().items() if k != "references"})
+
+    def no_position(z=None, psi=None, *, x=None, y=None):
+        raise ValueError("the bridge holds depth and heading only")
+
+    monkeypatch.setattr(session.source, "set_reference", no_position)
+    err = _refused(session, {"cmd": "reference", "north_m": 1.0})
+    assert err.key == "north_m" and err.message == "reference refused: the bridge holds depth and heading only"
+
+
+@pytest.mark.parametrize("value", [10**400, -(10**400)], ids=["+1e400", "-1e400"])
+def test_an_integer_beyond_a_float_is_refused_not_an_overflow(session, value):
+    for command in ({"cmd": "reference", "depth_m": value}, {"cmd": "speed", "value": value}):
+        err = _refused(session, command)
+        assert "an integer of 401 digits" in err.message

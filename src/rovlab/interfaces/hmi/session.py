@@ -10,9 +10,10 @@ Commands are JSON objects ``{"cmd": NAME, ...}`` (an optional ``id`` is echoed i
 ``step``           ``n`` (default 1, at most 100) control steps while paused
 ``reset``          back to the scenario's start (tuned parameters are kept; a new log run begins)
 ``speed``          ``value``: 0.1 .. 50 times real time
-``reference``      ``depth_m``, ``heading_deg`` (degrees at the edge), ``north_m`` and/or ``east_m``
-                   (position set-point, for the "dp" controller); ``schedule: true`` goes back to
-                   the scenario's reference schedule
+``reference``      ``depth_m`` (0 .. 1000), ``heading_deg`` (degrees at the edge, -720 .. 720, wrapped
+                   to -180 .. 180), ``north_m`` and/or ``east_m`` (position set-point, only for a
+                   controller that follows x and y, e.g. "dp"); ``schedule: true`` goes back to the
+                   scenario's reference schedule
 ``sensor``         ``sensor``: name, ``available``: true/false (simulated drop-out)
 ``filter_mode``    ``channel``: e.g. ``qualisys.z``, ``mode``: auto | off | on
 ``set``            ``target``: vehicle | truth | config, and ``key`` + ``value`` or ``changes``
@@ -49,6 +50,12 @@ TARGETS = ("vehicle", "truth", "config")
 SPEED_RANGE = (0.1, 50.0)
 MAX_STEPS_PER_COMMAND = 100  # 10 s of a 0.1 s loop: one client's "step" must not stall the others
 MAX_COMMAND_DEPTH = 16  # nesting of a command's JSON (a key path's value is at most a table of lists)
+DEPTH_RANGE_M = (0.0, 1000.0)  # a depth set-point: the free surface down to beyond any small vehicle's rating
+MAX_POSITION_M = 1e4  # |north|, |east| set-point: 10 km, far beyond a tethered vehicle's reach
+# |heading| set-point [deg]: two turns either way. Every way of writing a heading fits (-180 .. 180,
+# 0 .. 360, a value just past a turn such as 370, which wraps to 10); a larger one is a slip or a
+# unit mix-up that wrapping would hide: MAVLink's centidegrees (9000 for 90 deg) would wrap to 0 deg.
+MAX_HEADING_DEG = 720.0
 _DEG = math.pi / 180.0
 _FILE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,100}\.toml$")
 _SCENARIO_TRUTH_KEYS = {  # scenario [truth.parameters] key -> vehicle-file key path
@@ -241,18 +248,39 @@ class Session:
         east = _optional_number(c, "east_m")
         if z is None and heading is None and north is None and east is None:
             raise CommandError("a reference needs depth_m, heading_deg, north_m and/or east_m (or schedule: true)")
-        if z is not None and not -100.0 <= z <= 1000.0:
-            raise CommandError(f"depth_m must be within -100 .. 1000 m, got {z:g}", key="depth_m")
+        lo, hi = DEPTH_RANGE_M
+        if z is not None and not lo <= z <= hi:
+            raise CommandError(f"depth_m must be within {lo:g} .. {hi:g} m (NED: 0 is the free surface, positive "
+                               f"down), got {z:g}", key="depth_m")
+        if heading is not None and not -MAX_HEADING_DEG <= heading <= MAX_HEADING_DEG:
+            raise CommandError(f"heading_deg must be within -{MAX_HEADING_DEG:g} .. {MAX_HEADING_DEG:g} deg (it is "
+                               f"wrapped to -180 .. 180; a larger value is a slip or another unit, e.g. "
+                               f"centidegrees), got {heading:g}", key="heading_deg")
         for key, v in (("north_m", north), ("east_m", east)):
-            if v is not None and not -1e4 <= v <= 1e4:
-                raise CommandError(f"{key} must be within -10000 .. 10000 m, got {v:g}", key=key)
+            if v is not None and not -MAX_POSITION_M <= v <= MAX_POSITION_M:
+                raise CommandError(f"{key} must be within -{MAX_POSITION_M:g} .. {MAX_POSITION_M:g} m, got {v:g}",
+                                   key=key)
+        if north is not None or east is not None:
+            described = self.source.describe()
+            follows = described.get("references")  # what the running controller follows (None: not said)
+            if follows is not None and not {"x", "y"} <= set(follows):
+                key = "north_m" if north is not None else "east_m"
+                raise CommandError(f"{key}: the running controller {described.get('controller', '?')!r} holds "
+                                   f"{', '.join(follows) or 'nothing'} only, not a north/east position; choose a "
+                                   "position controller (e.g. dp, with an estimator of x and y) in the Control "
+                                   "tab first", key=key)
         psi = None
         if heading is not None:
             psi = math.remainder(heading * _DEG, 2.0 * math.pi)  # (-pi, pi]
-        if north is None and east is None:  # sources without position set-points keep their two-argument call
-            self.source.set_reference(z=z, psi=psi)
-        else:
-            self.source.set_reference(z=z, psi=psi, x=north, y=east)
+        try:
+            if north is None and east is None:  # sources without position set-points keep their two-argument call
+                self.source.set_reference(z=z, psi=psi)
+            else:
+                self.source.set_reference(z=z, psi=psi, x=north, y=east)
+        except ValueError as exc:  # the source's own check (a vehicle bridge: no DP there, no depth yet)
+            given = (("north_m", north), ("east_m", east), ("depth_m", z), ("heading_deg", heading))
+            key = next(k for k, v in given if v is not None)  # one was given (checked above)
+            raise CommandError(f"reference refused: {exc}", key=key) from None
         position = {k: v for k, v in (("north_m", north), ("east_m", east)) if v is not None}
         self.log.event(self.source.time, "reference", depth_m=z, heading_deg=heading, **position)
         return Outcome(state_changed=True)
@@ -460,6 +488,8 @@ def _kind(value: Any) -> str:
         return "nothing"
     if isinstance(value, bool):
         return str(value).lower()
+    if isinstance(value, int) and abs(value) >= 10**40:
+        return f"an integer of {len(str(abs(value)))} digits"
     if isinstance(value, (int, float)):
         return repr(value)
     if isinstance(value, str):
@@ -467,21 +497,33 @@ def _kind(value: Any) -> str:
     return f"a JSON {type(value).__name__}".replace("dict", "object").replace("list", "array")
 
 
+def _finite_float(value: Any) -> float | None:
+    """value as a finite float, or None (text, true/false, NaN, infinities, an integer beyond a float)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        x = float(value)
+    except OverflowError:  # a JSON integer of 400 digits
+        return None
+    return x if math.isfinite(x) else None
+
+
 def _check_speed(value: Any) -> float:
     lo, hi = SPEED_RANGE
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or not lo <= value <= hi:
+    x = _finite_float(value)
+    if x is None or not lo <= x <= hi:
         raise ValueError(f"speed must be a number from {lo:g} to {hi:g} (times real time), got {_kind(value)}")
-    return float(value)
+    return x
 
 
 def _optional_number(c: dict, key: str) -> float | None:
     value = c.get(key)
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    x = _finite_float(value)
+    if x is None:
         raise CommandError(f"{key} must be a finite number, got {_kind(value)}", key=key)
-    return float(value)
+    return x
 
 
 def _integer(c: dict, key: str, default: int, *, lo: int, hi: int) -> int:

@@ -40,7 +40,9 @@ class Source(Protocol):
         """Time of the next control step [s]."""
 
     def describe(self) -> dict[str, Any]:
-        """Names and fixed facts: channels (name, column, sensor, quantity, offset), sensors, thrusters."""
+        """Names and fixed facts: channels (name, column, sensor, quantity, offset), sensors, thrusters,
+        and (optional) ``references``: which of x, y, z, psi the running controller holds (the page
+        offers north/east set-points only when x and y are among them)."""
 
     def status(self) -> dict[str, Any]:
         """What the commands changed: reference, sensor availability, filter channel modes."""
@@ -104,6 +106,7 @@ class SimulationSource:
             "thrusters": list(sim.prep.allocator.bank.names),
             "controller": _controller_name(sim.prep),
             "controller_states": list(sim.prep.design.controller.state_names),
+            "references": list(sim.prep.design.controller.references),  # of x, y, z, psi: what it holds
         }
 
     def status(self) -> dict[str, Any]:
