@@ -3,7 +3,8 @@ Ctrl-C) leaves the old file, if any, and no temporary file behind.
 
 :func:`atomic_open` is the one implementation (a temporary file in the same folder, flushed and
 ``os.replace``d over the target; an existing file keeps its permission bits);
-:func:`atomic_write_text` and :func:`atomic_write_bytes` are its one-shot forms.
+:func:`atomic_write_text` and :func:`atomic_write_bytes` are its one-shot forms, and
+:func:`write_figure` writes a matplotlib figure through it.
 """
 
 from __future__ import annotations
@@ -52,3 +53,12 @@ def atomic_write_text(path: str | Path, text: str) -> None:
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     with atomic_open(path, "wb") as fh:
         fh.write(data)
+
+
+def write_figure(fig: Any, path: str | Path, **savefig: Any) -> Path:
+    """A matplotlib figure into ``path`` atomically, in the format its suffix names: a full disk
+    leaves no empty or partial image (``identify --plot`` left a 0-byte PNG), and an earlier one as it was."""
+    path = Path(path)
+    with atomic_open(path, "wb") as fh:
+        fig.savefig(fh, format=path.suffix.lower()[1:] or "png", **savefig)
+    return path

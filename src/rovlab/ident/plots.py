@@ -36,12 +36,14 @@ FORMATS = (".png", ".svg", ".pdf")
 
 
 def _save(fig: Any, path: str | Path) -> Path:
-    """Write exactly ``path`` in the format its suffix names (.png, .svg or .pdf)."""
+    """Write exactly ``path`` in the format its suffix names (.png, .svg or .pdf), atomically
+    (rovlab.core.files): a full disk leaves no empty or partial figure and an earlier one as it was."""
+    from rovlab.core.files import write_figure
+
     path = Path(path)
     if path.suffix.lower() not in FORMATS:
         raise ValueError(f"a figure file must end in {', '.join(FORMATS)}; got {str(path)!r}")
-    fig.savefig(path, dpi=110, format=path.suffix.lower()[1:])
-    return path
+    return write_figure(fig, path, dpi=110)
 
 
 def _pm(x: float, se: float) -> str:

@@ -4,6 +4,7 @@ function; this file only assembles them and turns user errors into clean message
 from __future__ import annotations
 
 import argparse
+import errno
 import gc
 import importlib
 import sys
@@ -71,6 +72,10 @@ def _parser_for(argv: Sequence[str]) -> argparse.ArgumentParser:
     return build_parser()
 
 
+# errno values of a file system that refuses a write: full, over quota, file too large, read-only, I/O
+_FILESYSTEM_REFUSALS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO})
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``rovlab`` command: ``argv`` (default: this process's command line)."""
     from rovlab.params.validate import ConfigError
@@ -87,6 +92,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"rovlab {args.command}: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:
+        if exc.errno not in _FILESYSTEM_REFUSALS:
+            raise
+        # a write the commands do not catch themselves: the disk or the file system said no
+        # (the atomic writers leave no partial file: rovlab.core.files)
+        what = str(exc.filename) if exc.filename else "its output"
+        print(f"rovlab {args.command}: error: cannot write {what}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     except BrokenPipeError:
         return 0
     finally:

@@ -56,16 +56,20 @@ def run_comparison(scenario: str, controllers: list[str], runs: int, seed: int |
     seeds = list(range(first, first + runs))
     progress = None if quiet or runs * len(controllers) < 4 else Progress(f"compare {name}")
     comparison, kept = compare(data, file, controllers, seeds, progress=progress)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "comparison.json", comparison)
-    text = table(comparison)
-    (out / "comparison.txt").write_text(text + "\n", encoding="utf-8")
+    from rovlab.core.files import atomic_write_text
+
     notes: list[str] = []
-    if figure:
-        try:
-            draw(out / "comparison.png", comparison, kept)
-        except ImportError:
-            notes.append("no figure: matplotlib is not installed (pip install 'rovlab[plot]')")
+    try:  # each file whole or not at all (a full disk: the message, no partial file)
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(out / "comparison.json", comparison)
+        atomic_write_text(out / "comparison.txt", table(comparison) + "\n")
+        if figure:
+            try:
+                draw(out / "comparison.png", comparison, kept)
+            except ImportError:
+                notes.append("no figure: matplotlib is not installed (pip install 'rovlab[plot]')")
+    except OSError as exc:
+        raise UserError(f"cannot write the comparison to {out}/: {exc.strerror or exc}; choose another --out") from None
     return comparison, out, notes
 
 

@@ -265,7 +265,6 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
     from rovlab.estimation.streaming import IntervalError, StreamingFilter
     from rovlab.interfaces.cli import UserError
     from rovlab.io.logwriter import ChunkWriter
-    from rovlab.io.tables import write_sidecar
 
     model = filt.model
     runner = StreamingFilter(filt, max_gap_steps=args.max_gap_steps)
@@ -312,52 +311,51 @@ def _filter_chunks(args: argparse.Namespace, vehicle, config, filt, inputs: tupl
         writer.write(out)
         n_rows += run.t.size
 
-    try:  # plain CSV (pandas reads it with defaults); what it is goes in a JSON sidecar
-        writer = ChunkWriter(args.out, names, significant=10, exact=("time_s",))
-        if args.out != "-":
-            write_sidecar(args.out, {"what": comments[0], "units": comments[1], "vehicle": vehicle.name,
-                                     "configuration": config.name, "estimator": estimator, "sample_time_s": model.h,
-                                     "log": str(args.log)})
-    except OSError as exc:
+    # plain CSV (pandas reads it with defaults); what it is goes in a JSON sidecar, written with the
+    # CSV when it is complete (a full disk or Ctrl-C leaves neither, and an earlier run's pair as it was)
+    sidecar = None if args.out == "-" else {
+        "what": comments[0], "units": comments[1], "vehicle": vehicle.name, "configuration": config.name,
+        "estimator": estimator, "sample_time_s": model.h, "log": str(args.log)}
+    try:
+        with ChunkWriter(args.out, names, significant=10, exact=("time_s",), sidecar=sidecar) as writer:
+            try:
+                chunk = next(chunks, None)
+                while chunk is not None:
+                    nxt = next(chunks, None)
+                    t = chunk.data["time_s"]
+                    if math.isnan(t_first):
+                        t_first = float(t[0])
+                    t_last = float(t[-1])
+                    u = np.column_stack([np.zeros(t.size) if c in absent else chunk.data[c] for c in inputs])
+                    y = np.column_stack([chunk.data[source[c]] for c in columns])
+                    samples += np.count_nonzero(~np.isnan(y), axis=0)
+                    dt = np.diff(np.concatenate([[t_prev], t]) if math.isfinite(t_prev) else t)
+                    gaps += int(np.count_nonzero((dt > 1.5 * model.h)
+                                                 & (dt <= (args.max_gap_steps + 0.5) * model.h)))
+                    for run in runner.feed(t, u, y, final=nxt is None):
+                        emit(writer, run)
+                    for r in runner.restart_rows:
+                        if r not in restart_times:
+                            restart_times[r] = float(t[r - rows_read]) if r >= rows_read else t_prev
+                    t_prev = float(t[-1])
+                    rows_read += t.size
+                    chunk = nxt
+            except IntervalError as exc:
+                raise ConfigError([Problem(stream.file, stream.where(exc.row, "time_s"),
+                                           f"a step of {exc.dt:.6g} s after line {stream.line_of(exc.row - 1)}",
+                                           "finite times that increase (each row is fused at the filter period "
+                                           f"nearest its time, h = {model.h:g} s)")],
+                                  "log") from None
+            if runner.restarts > 100:
+                first = runner.restart_rows[0]
+                raise ConfigError([Problem(str(args.log) if converted else stream.file,
+                                           f"t = {restart_times[first] - t_first:.6g} s" if converted
+                                           else stream.where(first, "time_s"),
+                                           f"{runner.restarts} gaps longer than {args.max_gap_steps} filter samples",
+                                           f"a log sampled near the configuration's sample time h = {model.h:g} s "
+                                           f"({config.file}: sample_time); gaps are exceptions")], "log")
+    except OSError as exc:  # a full disk: in the writer's thread, or at the end (CSV and sidecar)
         raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
-    with writer:
-        try:
-            chunk = next(chunks, None)
-            while chunk is not None:
-                nxt = next(chunks, None)
-                t = chunk.data["time_s"]
-                if math.isnan(t_first):
-                    t_first = float(t[0])
-                t_last = float(t[-1])
-                u = np.column_stack([np.zeros(t.size) if c in absent else chunk.data[c] for c in inputs])
-                y = np.column_stack([chunk.data[source[c]] for c in columns])
-                samples += np.count_nonzero(~np.isnan(y), axis=0)
-                dt = np.diff(np.concatenate([[t_prev], t]) if math.isfinite(t_prev) else t)
-                gaps += int(np.count_nonzero((dt > 1.5 * model.h) & (dt <= (args.max_gap_steps + 0.5) * model.h)))
-                for run in runner.feed(t, u, y, final=nxt is None):
-                    emit(writer, run)
-                for r in runner.restart_rows:
-                    if r not in restart_times:
-                        restart_times[r] = float(t[r - rows_read]) if r >= rows_read else t_prev
-                t_prev = float(t[-1])
-                rows_read += t.size
-                chunk = nxt
-        except IntervalError as exc:
-            raise ConfigError([Problem(stream.file, stream.where(exc.row, "time_s"),
-                                       f"a step of {exc.dt:.6g} s after line {stream.line_of(exc.row - 1)}",
-                                       "finite times that increase (each row is fused at the filter period "
-                                       f"nearest its time, h = {model.h:g} s)")],
-                              "log") from None
-        except OSError as exc:
-            raise UserError(f"cannot write {args.out}: {exc.strerror or exc}") from None
-        if runner.restarts > 100:
-            first = runner.restart_rows[0]
-            raise ConfigError([Problem(str(args.log) if converted else stream.file,
-                                       f"t = {restart_times[first] - t_first:.6g} s" if converted
-                                       else stream.where(first, "time_s"),
-                                       f"{runner.restarts} gaps longer than {args.max_gap_steps} filter samples",
-                                       f"a log sampled near the configuration's sample time h = {model.h:g} s "
-                                       f"({config.file}: sample_time); gaps are exceptions")], "log")
 
     report = sys.stderr if args.out == "-" else sys.stdout
     span = t_last - t_first if n_rows > 1 else 0.0

@@ -2,8 +2,9 @@
 simulator's timeseries.csv, the HMI's session log, a converted dive) or a chunk of rows at a
 time (:class:`ChunkWriter`: the estimates of ``rovlab filter``). Both write NaN as an empty cell
 ("no value"), so what they write :func:`rovlab.io.logreader.read_log` reads back unchanged, and
-both write atomically (a temporary file renamed over the target), so a crash or a refused run
-never leaves half a log.
+both write atomically through rovlab.core.files (a temporary file renamed over the target), so a
+crash, a full disk, Ctrl-C or a refused run never leaves half a log, a temporary file or a
+metadata sidecar without its log, and the files of an earlier run stay as they were.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from rovlab.core.files import atomic_open, atomic_write_bytes
 from rovlab.io.csvfile import csv_rows, floats, head, ints, labels, strings
 
 
@@ -79,14 +81,7 @@ def write_csv(target: str | Path | IO[str], columns: Mapping[str, Sequence | np.
     if str(target) == "-":
         sys.stdout.write(data.decode("utf-8"))
         return
-    path = Path(target)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    atomic_write_bytes(target, data)
 
 
 class ChunkWriter:
@@ -95,17 +90,22 @@ class ChunkWriter:
     ``100``), rounded to ``significant`` digits except the ``exact`` columns; NaN as an empty
     cell; text columns as given (not quoted: labels such as 'lost-timeout' only).
 
-    Atomic like :func:`write_csv`: rows go to a temporary file renamed over ``target`` by
-    :meth:`close`; :meth:`abort` (or an exception inside ``with``) removes it, so a refused or
-    interrupted run leaves no half-written output. ``-`` writes to standard output. Chunks are
-    rounded, formatted and written, in order, by a worker thread (pyarrow formats without the
-    GIL, so this overlaps the caller's next chunk), at most two chunks in flight.
+    Atomic like :func:`write_csv` (rovlab.core.files.atomic_open): rows go to a temporary file
+    renamed over ``target`` by :meth:`close`; :meth:`abort` (or an exception inside ``with``:
+    a refusal, Ctrl-C) removes it, and so does a write that fails (a full disk, in the worker
+    thread or at the end), whose OSError :meth:`write` or :meth:`close` raises in the caller's
+    thread. ``sidecar``: metadata written as JSON beside the file (rovlab.io.tables.write_sidecar)
+    once every row is on disk, just before the file is renamed into place, so the two appear
+    together or not at all. ``-`` writes to standard output (no sidecar). Chunks are rounded,
+    formatted and written, in order, by a worker thread (pyarrow formats without the GIL, so
+    this overlaps the caller's next chunk), at most two chunks in flight.
     """
 
     _IN_FLIGHT = 2
 
     def __init__(self, target: str | Path, names: Sequence[str], *, comments: Iterable[str] = (),
-                 significant: int | None = None, exact: Iterable[str] = ()) -> None:
+                 significant: int | None = None, exact: Iterable[str] = (),
+                 sidecar: Mapping[str, Any] | None = None) -> None:
         from concurrent.futures import ThreadPoolExecutor
 
         self.names = list(names)
@@ -114,15 +114,19 @@ class ChunkWriter:
         self.target = str(target)
         self.significant = significant
         self.exact = set(exact)
-        self._tmp: Path | None = None
+        self.sidecar = None if sidecar is None else dict(sidecar)
         self._pending: list = []
+        self._file: Any = None  # the atomic_open context of a file target
         if self.target == "-":
             self._f = sys.stdout.buffer
         else:
-            path = Path(target)
-            self._tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-            self._f = open(self._tmp, "wb")
-        self._f.write(head(self.names, list(comments)))
+            self._file = atomic_open(self.target, "wb")
+            self._f = self._file.__enter__()
+        try:
+            self._f.write(head(self.names, list(comments)))
+        except BaseException:
+            self._discard()
+            raise
         self._pool: Any = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rovlab-csv")
 
     def _format(self, columns: Mapping[str, Any]) -> Any:
@@ -178,25 +182,40 @@ class ChunkWriter:
                 self._pool = None
 
     def close(self) -> None:
+        """Finish: every chunk written, the sidecar, then the file renamed into place; if any of it
+        fails (e.g. OSError: the disk is full) nothing is left and the error is raised."""
         try:
             self._drain(keep=True)
+            if self._file is None:
+                self._f.flush()
+                return
+            self._f.flush()  # the rows on disk (a full disk says so here) before the sidecar
+            os.fsync(self._f.fileno())
+            if self.sidecar is not None:
+                from rovlab.io.tables import write_sidecar
+
+                write_sidecar(self.target, self.sidecar)
         except BaseException:
-            self.abort()  # a chunk could not be written: no output
+            self.abort()  # a chunk, the sidecar or the last rows could not be written: no output
             raise
-        if self._tmp is None:
-            self._f.flush()
-            return
-        self._f.close()
-        os.replace(self._tmp, self.target)
-        self._tmp = None
+        file, self._file = self._file, None
+        file.__exit__(None, None, None)  # fsync and rename; on failure it removes the temporary file
 
     def abort(self) -> None:
-        self._drain(keep=False)
-        if self._tmp is None:
+        """Stop: chunks not yet written are dropped and the temporary file is removed."""
+        try:
+            self._drain(keep=False)
+        finally:
+            self._discard()
+
+    def _discard(self) -> None:
+        file, self._file = self._file, None
+        if file is None:
             return
-        self._f.close()
-        self._tmp.unlink(missing_ok=True)
-        self._tmp = None
+        try:
+            file.__exit__(OSError, OSError("aborted"), None)  # removes the temporary file
+        except OSError:
+            pass  # closing it flushed into a full disk: it is removed all the same
 
     def __enter__(self) -> ChunkWriter:
         return self

@@ -286,8 +286,12 @@ def write_nees_figure(path: str | Path, t: np.ndarray, nees_runs: np.ndarray, bo
 
 
 def _save(fig, path: Path, plt) -> Path:
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    from rovlab.core.files import write_figure
+
+    try:
+        write_figure(fig, path, dpi=110)  # atomic: a full disk leaves no partial figure
+    finally:
+        plt.close(fig)
     return path
 
 

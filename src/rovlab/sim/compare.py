@@ -286,6 +286,10 @@ def figure(path: Any, comparison: Mapping[str, Any], kept: Mapping[str, list[Sim
     ax[3].set_xlabel("time [s]")
     ax[0].set_title(f"{comparison['scenario']} (seed {comparison['seeds'][0]}): " + " vs ".join(kept))
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    from rovlab.core.files import write_figure
+
+    try:
+        write_figure(fig, path, dpi=110)  # atomic: a full disk leaves no partial figure
+    finally:
+        plt.close(fig)
     return path

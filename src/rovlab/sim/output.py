@@ -45,8 +45,10 @@ def _clean(o: Any) -> Any:
 
 
 def write_json(path: Path, data: Mapping[str, Any]) -> Path:
-    path.write_text(json.dumps(_clean(json.loads(json.dumps(data, default=_json_default))), indent=2) + "\n",
-                    encoding="utf-8")
+    """``data`` as JSON, atomically (a full disk leaves no partial file, and an earlier one as it was)."""
+    from rovlab.core.files import atomic_write_text
+
+    atomic_write_text(path, json.dumps(_clean(json.loads(json.dumps(data, default=_json_default))), indent=2) + "\n")
     return path
 
 
