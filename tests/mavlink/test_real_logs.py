@@ -181,3 +181,32 @@ def test_a_jump_in_the_real_heading_is_still_gated(capsys, tmp_path, my_rov):
     psi = np.asarray(read_log(est)["est_psi"])
     for i in (spike, offset):  # the estimate does not jump with the sample: it was not used
         assert abs(math.degrees(psi[i] - psi[i - 1])) < 0.1, t[i]
+
+
+def test_the_ekf_takes_the_thrust_as_uncertain_and_rejects_no_healthy_gyro_sample(capsys, tmp_path, my_rov):
+    """Issue 27: the EKF reads [process_noise] thrust_uncertainty as the KF does (bluerov2_heavy_dp:
+    0.5) and adds (kappa tau_l)^2 Gamma_l Gamma_l^T per prediction. Replayed with it, the gate
+    rejects only the 1.07 deg/s spike at 215.21 s that the KF rejects too (8 sigma); without it 24
+    healthy gyro samples around the forward command at 214 s failed the gate."""
+    from rovlab.io.logreader import read_log
+    from rovlab.params.design import packaged_config_path
+
+    est = tmp_path / "est.csv"
+    code, out, err = run(capsys, "filter", TLOG, "--vehicle", my_rov, "--config", "bluerov2_heavy_dp",
+                         "--estimator", "ekf", "--out", est)
+    assert code == 0, err
+    assert "imu.r            5233 samples, 5232 used, 1 rejected by the gate" in out
+    assert "imu.psi          5233 samples, 5233 used, 0 rejected by the gate" in out
+    e = read_log(est)
+    t = e.time - e.time[0]
+    assert {e.text["status_r_imu"][i] for i in np.flatnonzero((t > 205.0) & (t < 240.0))} == {"ok"}
+    # the same design with the thrust taken as exact: the healthy gyro is rejected again
+    text = packaged_config_path("bluerov2_heavy_dp").read_text()
+    assert "thrust_uncertainty = 0.5" in text
+    exact = tmp_path / "exact_thrust.toml"
+    exact.write_text(text.replace("thrust_uncertainty = 0.5", "thrust_uncertainty = 0.0"))
+    code, out, err = run(capsys, "filter", TLOG, "--vehicle", my_rov, "--config", exact, "--estimator", "ekf",
+                         "--out", tmp_path / "exact.csv")
+    assert code == 0, err
+    rejected = int(out.split("imu.r")[1].split("used, ")[1].split(" rejected")[0])
+    assert rejected > 10, out
