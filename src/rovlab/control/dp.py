@@ -415,5 +415,4 @@ def read_dp_table(t: TableReader) -> DPConfig:
 register_component(ComponentInfo(
     "dp", "controller", build,
     description="dynamic positioning x, y, z, psi: reference model and nonlinear PID (Fossen 2011, ch. 12)",
-    parse_table=read_dp_table, default_table=DPConfig, summary=lambda spec: summary(spec.model),
-    references=("x", "y", "z", "psi")))
+    parse_table=read_dp_table, default_table=DPConfig, summary=lambda spec: summary(spec.model)))

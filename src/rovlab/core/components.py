@@ -289,9 +289,7 @@ class ComponentInfo:
     (rovlab.params.validate: the same checks and messages; the table's keys are closed), and
     ``default_table()`` gives the value a file without the table gets; the design reads it as
     ``config.table(name)``. An estimator names the quantities a measurement may give it
-    (``measurable``, e.g. z, psi, w, r); a controller the set-points it acts on (``references``,
-    of REFERENCE: depth and heading by default, x and y too for dynamic positioning), so that a
-    node, the bridge and the HMI pass on x/y only where they are used and say so where not.
+    (``measurable``, e.g. z, psi, w, r).
 
     ``check(spec, allocator, where)``, if given, is called with the built spec and the vehicle's
     allocation (rovlab.allocation.solvers.Allocator) when a design is made: it raises ConfigError
@@ -314,7 +312,6 @@ class ComponentInfo:
     parse_table: Callable[[Any], Any] | None = None
     default_table: Callable[[], Any] | None = None
     measurable: tuple[str, ...] = ()
-    references: tuple[str, ...] = ("z", "psi")
     check: Callable[[Any, Any, str], None] | None = None
     observer_model: Callable[[Any], tuple[Any, Any, Any, Any]] | None = None
     summary: Callable[[Any], dict[str, Any]] | None = None

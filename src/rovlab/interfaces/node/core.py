@@ -227,12 +227,9 @@ class NodeCore:
 
     @property
     def references(self) -> tuple[str, ...]:
-        """The set-points the controller acts on (rovlab.core.components.ComponentInfo.references:
-        z and psi, or x, y, z and psi for dynamic positioning)."""
-        from rovlab.core.components import component
-
-        info = component("controller", self.controller_name)
-        return info.references if info is not None else ("z", "psi")
+        """The set-points the controller acts on (its ControllerSpec.references, of x, y, z, psi:
+        z and psi for depth-and-heading control, all four for dynamic positioning)."""
+        return tuple(self.design.controller.references)
 
     @property
     def estimator_name(self) -> str:
