@@ -59,6 +59,11 @@ _PARAMS_WANTED: dict[str, tuple[str, ...]] = {
     "BARO2_GND_PRESS": ("BARO2_GND_PRESS",), "GCS_SYSID": (MY_GCS["4.7"], MY_GCS["4.1"]),
 }
 _PARAM_TRIES = 10  # requests (one a second) before the bridge says what the vehicle did not report
+# ArduSub's ranges of the joystick gains (ArduSub/Parameters.cpp @Range; the simulator's ParamSpecs
+# in rovlab.interfaces.mavlink.ardusub): the gain ArduSub applies is constrained to 0.1 .. 1.0
+# (ArduSub/joystick.cpp), JS_THR_GAIN is used as it is (throttle scale 0.8 gain JS_THR_GAIN)
+GAIN_RANGE = (0.1, 1.0)
+THROTTLE_GAIN_RANGE = (0.5, 4.0)
 _STREAMS = {"ATTITUDE": 30, "SCALED_PRESSURE2": 137, "SERVO_OUTPUT_RAW": 36}  # MAVLink message ids
 RATE_WINDOW_S = 2.0  # a stream's rate is measured over this long, from this long after asking
 RATE_TOLERANCE = 0.75  # below this share of the rate asked for, the bridge asks again
@@ -122,6 +127,7 @@ class MavlinkBridge:
         self._wanted = {**_PARAMS_WANTED, **{k: (k,) for k in self._vehicle_keys}}
         self._param_asks: dict[str, int] = dict.fromkeys(self._wanted, 0)
         self.live_gain: float | None = None  # NAMED_VALUE_FLOAT PilotGain
+        self.gain_problem: str | None = None  # JS_THR_GAIN outside ArduSub's range: neutral MANUAL_CONTROL only
         self.vehicle_seen = False
         self._first_seen: float | None = None
         self.armed = False
@@ -285,6 +291,8 @@ class MavlinkBridge:
         self.params[name] = float(msg.param_value)
         self.confirmed.add(key)
         self.param_names[key] = name
+        if name == "JS_THR_GAIN":
+            self._check_throttle_gain()
         if name == "BARO2_GND_PRESS" and msg.param_value > 0:
             self.smap.surface_hpa = float(msg.param_value) / 100.0
         if name == MY_GCS["4.7"] and "GCS_SYSID_HI" not in self._wanted:  # 4.7: a range of ids may count as the GCS
@@ -314,6 +322,21 @@ class MavlinkBridge:
         self._warn_once(f"mygcs-{low}-{high}", f"the vehicle's {where}, the bridge is system {self.sysid}: ArduSub "
                                                f"ignores its commands (use --sysid {low} or set {name})")
 
+    def _check_throttle_gain(self) -> None:
+        """JS_THR_GAIN outside ArduSub's range: MANUAL_CONTROL cannot be scaled to it, so the bridge
+        sends neutral inputs (1500 us whatever the gains) and says so, until it is back in range."""
+        lo, hi = THROTTLE_GAIN_RANGE
+        value = self.params["JS_THR_GAIN"]
+        bad = not lo <= value <= hi
+        if bad and self.gain_problem is None:
+            self.gain_problem = (f"the vehicle reports JS_THR_GAIN = {value!r}, outside ArduSub's range {lo:g} .. "
+                                 f"{hi:g}: MANUAL_CONTROL cannot be scaled to it, so the bridge sends neutral inputs "
+                                 "until it is back in range (set it on the vehicle, or use --command rc_override)")
+            self.log(self.gain_problem)
+        elif not bad and self.gain_problem is not None:
+            self.gain_problem = None
+            self.log(f"JS_THR_GAIN = {value:g} is back in ArduSub's range: MANUAL_CONTROL resumes")
+
     def _on_named_float(self, msg: Any) -> None:
         """NAMED_VALUE_FLOAT "PilotGain": the joystick gain ArduSub applies to MANUAL_CONTROL now
         (JS_GAIN_DEFAULT at boot, then whatever the pilot's gain buttons made of it)."""
@@ -321,8 +344,10 @@ class MavlinkBridge:
         if name.split("\x00", 1)[0] != "PilotGain":
             return
         gain = float(msg.value)
-        if not (math.isfinite(gain) and 0.0 < gain <= 1.0):
-            self._warn_once("gain-range", f"ignoring PilotGain {gain!r} from the vehicle: expected 0 .. 1")
+        if not (math.isfinite(gain) and GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]):
+            self._warn_once("gain-range", f"ignoring PilotGain {gain!r} from the vehicle: expected "
+                                          f"{GAIN_RANGE[0]:g} .. {GAIN_RANGE[1]:g} (ArduSub constrains the gain it "
+                                          "applies to that)")
             return
         old = self.live_gain
         self.live_gain = gain
@@ -332,10 +357,11 @@ class MavlinkBridge:
 
     def pilot_gain(self) -> float:
         """The gain ArduSub applies to MANUAL_CONTROL: the live PilotGain, else JS_GAIN_DEFAULT (the
-        gain at boot), else ArduSub's default 0.5."""
+        gain at boot, constrained to 0.1 .. 1.0 as ArduSub constrains it), else ArduSub's default 0.5."""
         if self.live_gain is not None:
             return self.live_gain
-        return self.params.get("JS_GAIN_DEFAULT", 0.5) or 0.5
+        boot = self.params.get("JS_GAIN_DEFAULT", 0.5)
+        return min(max(boot, GAIN_RANGE[0]), GAIN_RANGE[1]) if math.isfinite(boot) else 0.5
 
     # -- outgoing ------------------------------------------------------------------------------
     def _housekeeping(self, now: float) -> None:
@@ -495,9 +521,11 @@ class MavlinkBridge:
     def _send_inputs(self, inputs: np.ndarray, now: float, *, neutral: bool) -> None:
         self.inputs = np.asarray(inputs, dtype=float).copy()
         self._last_command_time = now
+        if self.command == "manual_control" and self.gain_problem is not None:
+            self.inputs, neutral = np.zeros(4), True  # a throttle gain it cannot scale to (said when it came)
         if self.command == "manual_control":
             gain = self.pilot_gain()
-            thr = self.params.get("JS_THR_GAIN", 1.0) or 1.0
+            thr = self.params.get("JS_THR_GAIN", 1.0) if self.gain_problem is None else 1.0  # neutral: any gain
             self.sent_gains = (gain, thr)
             x, y, z, r = manual_control_from_inputs(self.inputs, gain=gain, throttle_gain=thr)
             self.conn.mav.manual_control_send(self.target_system, x, y, z, r, 0)
