@@ -146,6 +146,30 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="accept channels that do not look like noise at rest (steps, a staircase, wandering)")
     p.set_defaults(func=_cmd_noise)
 
+    p = isub.add_parser("dive", help="heave and yaw added mass, damping and net buoyancy from a dive log (issue 29)",
+                        description="Output-error identification of heave and yaw from the vehicle's own log: the "
+                                    "commanded PWM through the vehicle's thrust curves as input, depth, heading and yaw "
+                                    "rate as outputs. LOG: a CSV (time_s, pwm_<thruster> or tau_Z/tau_N, "
+                                    "<channel>_<sensor> columns, as rovlab lab dive and rovlab mavlink convert write "
+                                    "them), a .tlog, a .BIN or a recorded .mcap. Reports each parameter's estimate, "
+                                    "standard deviation and correlations, refuses what the log does not determine, and "
+                                    "scores 1-, 10- and 100-step predictions on the last part of the log. " + SIGN_NOTE)
+    p.add_argument("file", metavar="LOG")
+    p.add_argument("--vehicle", required=True, metavar="NAME|FILE",
+                   help="the vehicle file to start from (thrust curves, sensors, rigid-body mass and inertia)")
+    p.add_argument("--dofs", default="heave,yaw", help="DOFs to identify (default heave,yaw)")
+    p.add_argument("--free", default="added_mass,linear,quadratic,net_buoyancy",
+                   help="parameters to estimate per DOF, from added_mass, linear, quadratic, net_buoyancy, "
+                        "thrust_scale (default added_mass,linear,quadratic,net_buoyancy; added_mass and thrust_scale "
+                        "exclude each other: no dive tells them apart)")
+    p.add_argument("--split", type=_positive, default=0.7, metavar="SHARE",
+                   help="share of the log used to identify; the rest validates (0.7)")
+    p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+    p.add_argument("--update", metavar="VEHICLE.toml",
+                   help="write the estimates into this vehicle file (comments kept, source notes with the log, time "
+                        "span, method and standard deviations; validated before writing)")
+    p.set_defaults(func=_cmd_dive)
+
     am = sub.add_parser("added-mass", help="added mass from box geometry (DNV-RP-H103, Sandøy 2016, sec. 4.2.1)",
                         description="Eidsvik's empirical method on DNV-RP-H103 tables. Give the six dimensions "
                                     "or --vehicle to use its [geometry]. " + SIGN_NOTE)
@@ -209,6 +233,40 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--samples", type=int, default=6796, help="samples (6796 as in the thesis)")
     p.add_argument("--rate-hz", type=_positive)
     p.set_defaults(func=_cmd_lab_noise)
+
+    p = lsub.add_parser("plan-dive", help="an excitation manoeuvre for identify dive, with the expected standard "
+                                          "deviations (issue 29)",
+                        description="Plan a random multi-level heave force and yaw moment within the thrust limits and "
+                                    "a depth band, with rests, and print how well each parameter will be determined "
+                                    "(Cramér-Rao standard deviations from the Fisher information at the vehicle file's "
+                                    "values, with its sensors' noise) before anything is flown.")
+    p.add_argument("--vehicle", default="bluerov2_heavy", metavar="NAME|FILE",
+                   help="packaged name or TOML file (bluerov2_heavy)")
+    p.add_argument("--dofs", default="heave,yaw", help="DOFs to excite (default heave,yaw)")
+    p.add_argument("--duration", type=_positive, default=300.0, metavar="S", help="length of the manoeuvre (300 s)")
+    p.add_argument("--depth-min", type=_positive, default=1.0, metavar="M", help="top of the depth band (1 m)")
+    p.add_argument("--depth-max", type=_positive, default=3.0, metavar="M", help="bottom of the depth band (3 m)")
+    p.add_argument("--heave-speed", type=_positive, default=0.4, metavar="M/S",
+                   help="heave speed the largest level reaches (0.4 m/s)")
+    p.add_argument("--yaw-rate", type=_positive, default=60.0, metavar="DEG/S",
+                   help="yaw rate the largest level reaches (60 deg/s)")
+    p.add_argument("--seed", type=_seed, default=0, help="random seed of the sequence (0)")
+    p.add_argument("--out", required=True, metavar="PLAN.toml", help="plan file to write")
+    p.add_argument("--json", action="store_true", help="print the plan's summary and expected sigmas as JSON")
+    p.set_defaults(func=_cmd_lab_plan_dive)
+
+    p = lsub.add_parser("dive", parents=[lcommon], help="fly a dive plan on a hidden vehicle (issue 29)",
+                        description="Fly a plan (rovlab lab plan-dive) on a hidden 'true' vehicle with the process "
+                                    "model, the thrusters (PWM quantised to 1 us, dead band) and a BlueROV2's sensors "
+                                    "(depth at 2 Hz, smoothed AHRS heading and yaw rate at 20 Hz); the log is what "
+                                    "rovlab identify dive reads. The truth goes into the file's JSON sidecar.")
+    p.add_argument("--plan", required=True, metavar="PLAN.toml")
+    p.add_argument("--truth-vehicle", metavar="NAME|FILE",
+                   help="the true vehicle (default: --vehicle with its heave and yaw added mass and damping changed by "
+                        "up to --spread and its net buoyancy by up to 2 N, drawn from --seed)")
+    p.add_argument("--spread", type=_nonnegative, default=0.25, help="relative spread of the hidden vehicle (0.25)")
+    p.add_argument("--depth-rate", type=_positive, default=2.0, metavar="HZ", help="pressure samples per second (2)")
+    p.set_defaults(func=_cmd_lab_dive)
 
 
 # --------------------------------------------------------------------------------------------
@@ -730,3 +788,161 @@ def _cmd_lab_noise(args: argparse.Namespace) -> int:
     v = _lab_vehicle(args)
     data = _lab_call(lambda: lab.resting_log(v, seed=args.seed, samples=args.samples, rate_hz=args.rate_hz))
     return _lab_report(args, [(args.out, data)], f"rovlab identify noise {args.out}")
+
+
+# --------------------------------------------------------------------------------------------
+# dives (issue 29)
+# --------------------------------------------------------------------------------------------
+
+def _dofs_arg(text: str) -> list[str]:
+    return [d.strip() for d in text.split(",") if d.strip()]
+
+
+def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
+    from rovlab.ident import plan as dive_plan
+
+    v = _lab_vehicle(args)
+    plan = _lab_call(lambda: dive_plan.plan_dive(
+        v, _dofs_arg(args.dofs), args.duration, seed=args.seed, depth_min=args.depth_min, depth_max=args.depth_max,
+        heave_speed=args.heave_speed, yaw_rate=math.radians(args.yaw_rate)))
+    expected = dive_plan.expected_sigmas(v, plan)
+    command = (f"rovlab lab plan-dive --vehicle {args.vehicle} --dofs {','.join(plan.dofs)} --duration {args.duration:g} "
+               f"--seed {args.seed} ({_dt.date.today().isoformat()})")
+    try:
+        dive_plan.write_plan(args.out, plan, expected, command=command)
+    except OSError as exc:
+        raise _user_error(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    nxt = f"rovlab lab dive --plan {args.out} --vehicle {args.vehicle} --seed 1 --out dive.csv"
+    if args.json:
+        data = {"plan": args.out, "vehicle": v.name, "dofs": list(plan.dofs), "duration_s": plan.duration_s,
+                "depth_band_m": [plan.depth_min, plan.depth_max], "amplitude": plan.settings.get("amplitude"),
+                "capacity": {k: list(c) for k, c in plan.capacity.items()},
+                "expected": [{"parameter": e.name, "dof": e.dof, "guess": e.guess, "sigma": e.sigma,
+                              "percent": e.percent if math.isfinite(e.percent) else None} for e in expected],
+                "next": nxt}
+        json.dump(_clean(data), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    amp = plan.settings.get("amplitude", {})
+    print(f"wrote {args.out}: {plan.duration_s:g} s of {' and '.join(plan.dofs)} excitation for {v.name}, depth band "
+          f"{plan.depth_min:g}-{plan.depth_max:g} m")
+    for dof, a in amp.items():
+        lo, hi = plan.capacity[dof]
+        unit = "N" if dof == "heave" else "N m"
+        print(f"  {dof}: levels up to {a:.3g} {unit} (thrusters give {lo:.3g} .. {hi:.3g} {unit} in {dof} alone)")
+    print("expected standard deviations (Cramér-Rao, at the vehicle file's values, first 70 % of the log):")
+    print(f"  {'parameter':10s} {'guess':>12s} {'sigma':>12s} {'sigma %':>9s}")
+    for e in expected:
+        pct = f"{e.percent:8.2f}%" if math.isfinite(e.percent) else "        -"
+        print(f"  {e.name:10s} {e.guess:12.5g} {e.sigma:12.3g} {pct}  {e.unit}")
+    print("  (the heading's AHRS errors counted as correlated over 0.5 s; a guess of 0 has no percentage)")
+    print(f"next: {nxt}")
+    return 0
+
+
+def _cmd_lab_dive(args: argparse.Namespace) -> int:
+    from rovlab.ident import dive, lab
+    from rovlab.ident import plan as dive_plan
+    from rovlab.params.vehicle import load_vehicle
+
+    v = _lab_vehicle(args)
+    plan = dive_plan.read_plan(args.plan)
+    if plan.vehicle != v.name:
+        print(f"rovlab: note: {args.plan} was planned for {plan.vehicle!r}, flown with {v.name!r}", file=sys.stderr)
+    seed = args.seed if args.seed is not None else lab.new_seed()
+    truth = (load_vehicle(args.truth_vehicle) if args.truth_vehicle
+             else _lab_call(lambda: dive.hidden_vehicle(v, seed, spread=args.spread)))
+    flight = _lab_call(lambda: dive.fly_plan(plan, v, truth, seed=seed, depth_rate_hz=args.depth_rate))
+    notes = flight.notes + ((f"the depth guard held the excitation for {flight.guard_s:g} s",) if flight.guard_s else ())
+    notes += (f"true depth {flight.depth_range[0]:.2f} .. {flight.depth_range[1]:.2f} m",)
+    fmt = {k: ".6g" for k in flight.columns if k.startswith("pwm_")}
+    data = lab.LabData("dive", flight.columns, flight.truth,
+                       {"plan": args.plan, "truth_vehicle": args.truth_vehicle or f"hidden (seed {seed}, spread "
+                                                                                    f"{args.spread:g})",
+                        "depth_rate_hz": args.depth_rate}, seed, v.name, fmt, notes)
+    return _lab_report(args, [(args.out, data)], f"rovlab identify dive {args.out} --vehicle {args.vehicle}")
+
+
+def _cmd_dive(args: argparse.Namespace) -> int:
+    from rovlab.ident import dive
+    from rovlab.params.vehicle import load_vehicle
+
+    if not 0.2 <= args.split <= 0.95:
+        raise _user_error(f"--split must be within 0.2 .. 0.95 (the share of the log used to identify), got {args.split:g}")
+    dofs = _dofs_arg(args.dofs)
+    bad = [d for d in dofs if d not in dive.DOFS]
+    if bad or not dofs:
+        raise _user_error(f"--dofs {args.dofs}: identification from dives covers {', '.join(dive.DOFS)} (surge and sway "
+                          "need position or velocity in the log)")
+    free = _dofs_arg(args.free)
+    unknown = [k for k in free if k not in dive.KEYS]
+    if unknown or not free:
+        raise _user_error(f"--free {args.free}: expected a selection of {', '.join(dive.KEYS)}")
+    v = load_vehicle(args.vehicle)
+    target = _check_update_target(args.update) if args.update else None
+    try:
+        data = _run(args.file, lambda: dive.read_dive(args.file, v))
+    except (ValueError, RuntimeError) as exc:  # rovlab.interfaces.mavlink.logs.LogError, a missing pymavlink
+        raise _user_error(str(exc)) from None
+    fit = _run(args.file, lambda: dive.identify_dive(data, v, dofs=dofs, free=free, split=args.split))
+    updated = None
+    if target is not None:
+        edits = dive.dive_edits(fit, v)
+        if not edits:
+            print(f"rovlab: note: nothing determined by {args.file}: {target} left as it was", file=sys.stderr)
+        else:
+            from rovlab.params.edit import edit_vehicle_file
+
+            notes = {b: f"{n} ({_dt.date.today().isoformat()})" for b, n in
+                     dive.provenance(fit, Path(args.file).name).items()}
+            try:
+                edit_vehicle_file(target, edits, sources=notes)
+            except OSError as exc:
+                raise _user_error(f"--update: cannot write {target}: {exc.strerror or exc}; the file is unchanged "
+                                  "(nothing was written)") from None
+            updated = str(target)
+            print(f"updated {target}: " + ", ".join(edits) + "; source notes: " + "; ".join(notes.values()),
+                  file=sys.stderr)
+    d = fit.as_dict() | {"vehicle": v.name, "updated": updated}
+    _emit(args, d, _dive_text(fit, v.name))
+    return 0
+
+
+def _dive_text(fit, vehicle: str) -> str:
+    a, b = fit.ident_span
+    lines = [f"heave and yaw from {fit.file} (vehicle {vehicle}): identification {a:.1f}-{b:.1f} s, validation "
+             f"{fit.valid_span[0]:.1f}-{fit.valid_span[1]:.1f} s; output error, Newey-West standard deviations"]
+    lines += [f"  {n}" for n in fit.notes]
+    for dof, f in fit.fits.items():
+        if f.refused_dof:
+            lines.append(f"{dof}: not identified: {f.refused_dof}")
+            continue
+        unit = "m/s" if dof == "heave" else "rad/s"
+        lines.append(f"{dof}: {sum(f.samples.values())} samples in {f.windows} windows, speed RMS {f.speed_rms:.3g} "
+                     f"max {f.speed_max:.3g} {unit}; residual RMS "
+                     + ", ".join(f"{k} {v:.3g}" for k, v in f.rms.items()))
+        lines.append(f"  {'parameter':9s} {'estimate':>12s} {'sigma':>10s} {'sigma %':>8s} {'file':>12s}")
+        for p in f.params:
+            if p.status == "estimated":
+                pct = 100 * p.sigma / abs(p.estimate) if p.estimate else math.inf
+                lines.append(f"  {p.name:9s} {p.estimate:12.5g} {p.sigma:10.3g} {pct:7.2f}% {p.start:12.5g}  {p.unit}"
+                             + (f"  ({p.note})" if p.note else ""))
+            elif p.status == "refused":
+                lines.append(f"  {p.name:9s} {'refused':>12s} {'':10s} {'':8s} {p.start:12.5g}  {p.note}")
+        if len(f.estimated) > 1:
+            names = [dict((p.key, p.name) for p in f.params)[k] for k in f.estimated]
+            lines.append("  correlations: " + ", ".join(
+                f"{names[i]}/{names[j]} {f.correlation[i, j]:+.2f}" for i in range(len(names))
+                for j in range(i + 1, len(names)) if abs(f.correlation[i, j]) >= 0.5) or "  correlations: all below 0.5")
+    if fit.prediction:
+        from rovlab.ident.dive import HORIZONS, PREDICTION_STEP_S
+
+        lines.append(f"prediction RMSE on the validation segment (steps of {PREDICTION_STEP_S:g} s; identified / file):")
+        head = "".join(f"{f'{k} step' + ('s' if k > 1 else ''):>22s}" for k in HORIZONS)
+        lines.append(f"  {'':12s}{head}")
+        for out, rows in fit.prediction.items():
+            scale, unit = (1.0, "m") if out == "depth_m" else (180 / math.pi, "deg")
+            cells = "".join(f"{rows['identified'][i] * scale:10.3g} / {rows['file'][i] * scale:<9.3g}"
+                            for i in range(len(HORIZONS)))
+            lines.append(f"  {out.split('_')[0] + ' [' + unit + ']':12s}{cells}")
+    return "\n".join(lines)

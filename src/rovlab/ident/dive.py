@@ -1,0 +1,1031 @@
+"""Identification from a dive: heave and yaw from the vehicle's own log (issue 29).
+
+A BlueROV2 owner has no towing carriage and no motion capture, only the vehicle and its log:
+commanded PWM, the pressure sensor's depth (ArduSub's SCALED_PRESSURE2, ~2 Hz) and the AHRS
+heading and yaw rate (ATTITUDE, ~20 Hz). This module turns such a log into the heave and yaw
+parameters of the vehicle file, with standard deviations, correlations and a validation.
+
+The model (rovlab.models.kinetics with roll = pitch = 0, fully submerged, and no surge or sway:
+heave and yaw are then decoupled; SNAME signs):
+
+    (m - Z_wdot) w_dot = s_Z tau_Z - (B - W) + Z_w w + Z_|w|w |w| w + Z_www w^3,   z_dot = w
+    (I_zz - N_rdot) r_dot = s_N tau_N + N_r r + N_|r|r |r| r + N_rrr r^3,          psi_dot = r
+
+tau_Z, tau_N: the wrench of the logged PWM through the vehicle file's thrust curves and
+configuration matrix (held between commands); s_Z, s_N: thrust scales (1 = the curves are right);
+the cubic terms are held at the file's values. Outputs: depth (pressure sensor), heading and yaw
+rate (AHRS), at the times they were logged.
+
+**What no dive can tell.** The equations are unchanged when M, s, B - W and the damping of a DOF
+are all multiplied by one constant: the motion responds to force / mass only. So the added mass
+and the thrust scale of a DOF cannot both be estimated from any manoeuvre; one must be known (a
+bollard/load-cell test of the thrusters, ``rovlab identify thrust``, fixes s; a known added mass
+fixes M). By default s = 1 (the vehicle file's thrust curves) and the added mass is estimated;
+``free=`` may choose the thrust scale instead (then the added mass is held).
+
+**Method.** Output error, i.e. maximum likelihood for white measurement noise (Ljung 1999,
+sec. 7.4; Jategaonkar 2015, Flight Vehicle System Identification, ch. 4): the model is simulated
+with the logged input (RK4 on a fixed grid) and its outputs are fitted to the measured ones by
+``scipy.optimize.least_squares`` (trust-region reflective, bounds: M > 0 with added mass <= 0,
+damping <= 0). To keep slow unmodelled forces (process noise, a tether) from accumulating in the
+integrated depth over minutes, the identification segment is cut into windows (30 s) that each
+start from their own fitted position and velocity (multiple shooting; Bock 1981). The start is a
+constrained linear least-squares fit of the equation of motion (equation error) on velocities and
+accelerations from a smoothing spline of the measurements (``scipy.optimize.lsq_linear`` with the
+same bounds), or the vehicle file's guess where that fits the outputs better. Each channel's
+weight is its residual variance (estimated: ML with unknown noise levels; the vehicle file's
+variance is the first guess).
+
+**Uncertainty.** cov = (J^T J)^-1 S (J^T J)^-1 with J the Jacobian of the weighted residuals at
+the optimum and S a Newey-West (Bartlett-weighted) estimate of the residuals' score covariance per
+channel (Newey & West 1987), so that a smoothed AHRS heading, whose errors are correlated from
+sample to sample, does not give optimistic standard deviations; never smaller than the white-noise
+covariance s^2 (J^T J)^-1 (s^2 the residual variance).
+
+**Refusals.** A parameter whose standard deviation is large against what it does (added mass:
+30 % of it; a damping term: 30 % of the damping force at the log's RMS speed; a thrust scale: 0.1)
+is not reported: it is held at the vehicle file's value, the fit repeated, and the report names it
+with the manoeuvre that would determine it. A DOF the log does not move at all is refused whole.
+
+**Validation.** The log is split in time: identification (the first 70 %) and validation (the
+rest). On the validation segment, the depth and heading are predicted 1, 10 and 100 steps of
+0.1 s ahead from states taken from the data alone (the latest heading and yaw rate samples; depth
+and heave velocity from a causal quadratic fit of the last 3 s of depth), for the identified
+model and for the vehicle file it started from: the same initial states for both.
+
+The virtual dive (:func:`fly_plan`) flies a plan (rovlab.ident.plan) on a hidden vehicle with the
+process model of rovlab.models.kinetics (4-DOF, RK4 at 0.01 s), its thrusters (allocation of the
+model vehicle, PWM quantised to 1 us, the true vehicle's thrust curves with their dead band) and a
+BlueROV2's sensors: depth at 2 Hz with the file's variance and resolution, AHRS heading at 20 Hz
+with a smoothed (first-order Gauss-Markov, 0.5 s) error of the file's variance, yaw rate at 20 Hz.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rovlab.ident.fitting import IdentificationError, significant
+from rovlab.params.vehicle import Vehicle
+
+DOFS = ("heave", "yaw")
+_DOF_INDEX = {"heave": 2, "yaw": 3}
+# parameter keys per DOF (the fit's internal names) and how the report and the vehicle file call them
+KEYS = ("added_mass", "linear", "quadratic", "net_buoyancy", "thrust_scale")
+NAMES = {"heave": {"added_mass": "Z_wdot", "linear": "Z_w", "quadratic": "Z_|w|w", "net_buoyancy": "B-W",
+                   "thrust_scale": "s_Z"},
+         "yaw": {"added_mass": "N_rdot", "linear": "N_r", "quadratic": "N_|r|r", "thrust_scale": "s_N"}}
+UNITS = {"heave": {"added_mass": "kg", "linear": "N s/m", "quadratic": "N s^2/m^2", "net_buoyancy": "N",
+                   "thrust_scale": ""},
+         "yaw": {"added_mass": "kg m^2", "linear": "N m s/rad", "quadratic": "N m s^2/rad^2", "thrust_scale": ""}}
+DEFAULT_FREE = ("added_mass", "linear", "quadratic", "net_buoyancy")
+GRID_S = 0.05  # model integration step [s]
+WINDOW_S = 30.0  # multiple-shooting window [s]
+PREDICTION_STEP_S = 0.1
+HORIZONS = (1, 10, 100)
+MAX_REL = 0.3  # refusal threshold (module docstring)
+MAX_SCALE_SIGMA = 0.1
+AHRS_TAU_S = 0.5  # correlation time of the virtual AHRS heading error [s]
+_DEG = math.pi / 180.0
+
+
+# --------------------------------------------------------------------------------------------
+# The heave / yaw model
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class DofModel:
+    """One DOF's parameters (SNAME signs, SI)."""
+
+    dof: str
+    rigid: float  # m [kg] or I_zz [kg m^2] (known: weigh the vehicle)
+    added_mass: float
+    linear: float
+    quadratic: float
+    cubic: float  # held fixed
+    net_buoyancy: float = 0.0  # B - W [N] (heave)
+    thrust_scale: float = 1.0
+
+    def values(self) -> dict[str, float]:
+        out = {k: float(getattr(self, k)) for k in KEYS}
+        if self.dof == "yaw":
+            out.pop("net_buoyancy")
+        return out
+
+    def with_values(self, values: Mapping[str, float]) -> DofModel:
+        from dataclasses import replace
+
+        changes: dict[str, Any] = {k: float(v) for k, v in values.items()}
+        return replace(self, **changes)
+
+
+def dof_model(vehicle: Vehicle, dof: str) -> DofModel:
+    i = _DOF_INDEX[dof]
+    return DofModel(dof, float(vehicle.mass if dof == "heave" else vehicle.I_zz), float(vehicle.added_mass[i]),
+                    float(vehicle.damping_linear[i]), float(vehicle.damping_quadratic[i]),
+                    float(vehicle.damping_cubic[i]),
+                    float(vehicle.buoyancy - vehicle.weight) if dof == "heave" else 0.0, 1.0)
+
+
+def simulate(model: DofModel, tau: Sequence[float], h: float, p0: float, v0: float) -> tuple[list[float], list[float]]:
+    """Position and velocity on the grid 0, h, ... len(tau) h (RK4, tau[k] held over step k)."""
+    inv = 1.0 / (model.rigid - model.added_mass)
+    s, nb, lin, quad, cub = model.thrust_scale, model.net_buoyancy, model.linear, model.quadratic, model.cubic
+    p, v = float(p0), float(v0)
+    ps, vs = [p], [v]
+    hh, h6 = 0.5 * h, h / 6.0
+    for f in tau:
+        g = s * f - nb
+        k1 = (g + (lin + quad * abs(v) + cub * v * v) * v) * inv
+        v2 = v + hh * k1
+        k2 = (g + (lin + quad * abs(v2) + cub * v2 * v2) * v2) * inv
+        v3 = v + hh * k2
+        k3 = (g + (lin + quad * abs(v3) + cub * v3 * v3) * v3) * inv
+        v4 = v + h * k3
+        k4 = (g + (lin + quad * abs(v4) + cub * v4 * v4) * v4) * inv
+        p += h6 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+        v += h6 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        if not (abs(v) < 1e6):  # diverged (a bad parameter trial): stop, the residuals say so
+            ps.extend([math.nan] * (len(tau) + 1 - len(ps)))
+            vs.extend([math.nan] * (len(tau) + 1 - len(vs)))
+            return ps, vs
+        ps.append(p)
+        vs.append(v)
+    return ps, vs
+
+
+# --------------------------------------------------------------------------------------------
+# Dive data: input and output samples
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class Channel:
+    """Samples of one output: ``kind`` 'position' (depth, heading) or 'velocity' (yaw rate)."""
+
+    name: str
+    dof: str
+    kind: str
+    t: np.ndarray
+    y: np.ndarray
+    sigma: float  # from the vehicle file (the fit re-estimates it)
+
+
+@dataclass(frozen=True, eq=False)
+class DiveData:
+    """A dive log in SI: the thrust wrench (held from each command time) and the output samples."""
+
+    file: str
+    t_cmd: np.ndarray  # command times [s]
+    tau: np.ndarray  # (n, 4) [X, Y, Z, N] from each command time on
+    channels: tuple[Channel, ...]
+    notes: tuple[str, ...] = ()
+
+    def channel(self, dof: str, kind: str) -> Channel | None:
+        return next((c for c in self.channels if c.dof == dof and c.kind == kind), None)
+
+    @property
+    def span(self) -> tuple[float, float]:
+        ts = [c.t for c in self.channels if c.t.size] + [self.t_cmd]
+        return float(min(t[0] for t in ts)), float(max(t[-1] for t in ts))
+
+
+def _sensor_channels(vehicle: Vehicle) -> dict[str, tuple[str, str, str, float, float]]:
+    """Which sensor gives depth, heading and yaw rate: key -> (column, sensor, channel, variance,
+    resolution). Depth: a pressure sensor; heading and yaw rate: an IMU/AHRS, else motion capture."""
+    out: dict[str, tuple[str, str, str, float, float]] = {}
+    wanted = {"depth": (("pressure", "z"),), "heading": (("imu", "psi"), ("motion_capture", "psi")),
+              "rate": (("imu", "r"),)}
+    for key, options in wanted.items():
+        for kind, ch in options:
+            s = next((s for s in vehicle.sensors if s.kind == kind and ch in s.variance), None)
+            if s is not None:
+                out[key] = (f"{ch}_{s.name}", s.name, ch, float(s.variance[ch]), float(s.resolution.get(ch, 0.0)))
+                break
+    return out
+
+
+def dive_from_columns(cols: Mapping[str, np.ndarray], vehicle: Vehicle, *, file: str = "<log>") -> DiveData:
+    """A dive from log columns: ``time_s``; the input as ``pwm_<thruster>`` per thruster (converted
+    through the vehicle's thrust curves and configuration matrix) or as ``tau_Z``, ``tau_N`` (what
+    ``rovlab mavlink convert`` writes); outputs ``<channel>_<sensor>`` of the vehicle's sensors
+    (depth, heading, yaw rate); NaN = no sample at that row."""
+    from rovlab.allocation.geometry import configuration_matrix
+    from rovlab.models.thrusters import ThrusterBank
+
+    if "time_s" not in cols:
+        raise IdentificationError(f"{file}: no time_s column; expected a dive log (time_s, pwm_<thruster> or "
+                                  "tau_Z/tau_N, and the sensors' columns)")
+    t = np.asarray(cols["time_s"], dtype=float)
+    pwm_names = [f"pwm_{n}" for n in vehicle.thruster_names]
+    notes: list[str] = []
+    if all(n in cols for n in pwm_names):
+        pwm = np.column_stack([np.asarray(cols[n], dtype=float) for n in pwm_names])
+        ok = np.all(np.isfinite(pwm), axis=1)
+        bank = ThrusterBank.from_vehicle(vehicle)
+        B = configuration_matrix(vehicle)
+        t_cmd = t[ok]
+        forces = np.array([bank.force(row, compiled=False) for row in pwm[ok]]) if ok.any() else np.zeros((0, len(pwm_names)))
+        tau6 = forces @ B.T if forces.size else np.zeros((0, 6))
+        tau = tau6[:, [0, 1, 2, 5]] if tau6.size else np.zeros((0, 4))
+        notes.append(f"input: PWM of {', '.join(vehicle.thruster_names)} through {vehicle.name}'s thrust curves")
+    elif "tau_Z" in cols and "tau_N" in cols:
+        z, n = np.asarray(cols["tau_Z"], dtype=float), np.asarray(cols["tau_N"], dtype=float)
+        x = np.asarray(cols.get("tau_X", np.zeros_like(z)), dtype=float)
+        y = np.asarray(cols.get("tau_Y", np.zeros_like(z)), dtype=float)
+        ok = np.isfinite(z) & np.isfinite(n)
+        t_cmd = t[ok]
+        tau = np.column_stack([x[ok], y[ok], z[ok], n[ok]])
+        notes.append("input: the log's tau_Z, tau_N (thrust wrench from PWM through the vehicle's thrust curves)")
+    else:
+        missing = [n for n in pwm_names if n not in cols]
+        raise IdentificationError(f"{file}: no thruster input: expected a column pwm_<thruster> for each thruster of "
+                                  f"{vehicle.name} (missing {', '.join(missing)}) or the columns tau_Z and tau_N")
+    if t_cmd.size == 0:
+        raise IdentificationError(f"{file}: no row with the thruster input; expected PWM or tau_Z/tau_N values")
+    sens = _sensor_channels(vehicle)
+    chans: list[Channel] = []
+    for key, dof, kind in (("depth", "heave", "position"), ("heading", "yaw", "position"), ("rate", "yaw", "velocity")):
+        if key not in sens:
+            continue
+        col, _, _, var, _ = sens[key]
+        if col not in cols:
+            continue
+        y = np.asarray(cols[col], dtype=float)
+        m = np.isfinite(y)
+        ty, yy = t[m], y[m]
+        if key == "heading" and yy.size:
+            yy = np.unwrap(yy)
+        chans.append(Channel(col, dof, kind, ty, yy, math.sqrt(var)))
+    if not chans:
+        want = ", ".join(v[0] for v in sens.values()) or "none (the vehicle file has no pressure or heading sensor)"
+        raise IdentificationError(f"{file}: no output column of {vehicle.name}'s sensors; expected {want}")
+    return DiveData(file, t_cmd, tau, tuple(chans), tuple(notes))
+
+
+def read_dive(path: str | Path, vehicle: Vehicle) -> DiveData:
+    """A dive from a CSV log (:func:`dive_from_columns`) or a .tlog / .BIN / .mcap MAVLink log
+    (rovlab.interfaces.mavlink.logs: SERVO_OUTPUT_RAW through the thrust curves, SCALED_PRESSURE2
+    depth, ATTITUDE heading and yaw rate)."""
+    path = Path(path)
+    if path.suffix.lower() in (".tlog", ".bin", ".mcap"):
+        from types import SimpleNamespace
+
+        from rovlab.interfaces.mavlink.logs import filter_columns, read_records, stamp_outliers
+
+        records = read_records(path)
+        drop = set(stamp_outliers([r[0] for r in records], 100.0))
+        records = [r for i, r in enumerate(records) if i not in drop]
+        sens = _sensor_channels(vehicle)
+        kinds = {"depth": "pressure", "heading": "imu", "rate": "imu"}
+        chans = tuple(SimpleNamespace(column=v[0], kind=kinds[k] if k != "heading" or v[0].startswith("psi_") else "imu",
+                                      quantity=v[2]) for k, v in sens.items())
+        cols = filter_columns(records, vehicle, chans, 0.1, file=str(path))
+        return dive_from_columns(cols, vehicle, file=str(path))
+    from rovlab.io.logreader import read_log
+
+    log = read_log(path)
+    return dive_from_columns(dict(log.data), vehicle, file=str(path))
+
+
+# --------------------------------------------------------------------------------------------
+# Output-error problem of one DOF
+# --------------------------------------------------------------------------------------------
+
+@dataclass(eq=False)
+class _Window:
+    i0: int  # first grid index
+    n: int  # grid steps in the window
+    samples: list[tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]  # (channel index, j, alpha, y, idx)
+
+
+class _Problem:
+    """Output error of one DOF on [t0, t1]: global parameters + (p0, v0) per window."""
+
+    def __init__(self, data: DiveData, dof: str, base: DofModel, free: Sequence[str], t0: float, t1: float, *,
+                 grid_s: float = GRID_S, window_s: float = WINDOW_S) -> None:
+        self.dof, self.base, self.free, self.h = dof, base, tuple(free), grid_s
+        self.t0 = t0
+        n = int(math.floor((t1 - t0) / grid_s + 1e-9))
+        if n < 4:
+            raise IdentificationError(f"{data.file}: the {dof} segment {t0:g}-{t1:g} s is too short")
+        tg = t0 + grid_s * np.arange(n + 1)
+        self.tau = _held(data, tg[:-1], _DOF_INDEX[dof]).tolist()
+        self.channels = [c for c in data.channels if c.dof == dof]
+        self.sigma = np.array([c.sigma for c in self.channels], dtype=float)
+        nw = max(1, int(round((t1 - t0) / window_s)))
+        edges = np.linspace(0, n, nw + 1).round().astype(int)
+        self.windows: list[_Window] = []
+        self.count = 0
+        for a, b in zip(edges[:-1], edges[1:]):
+            samples = []
+            for ci, c in enumerate(self.channels):
+                lo, hi = tg[a], tg[b]
+                m = (c.t >= lo) & (c.t < hi) if b < n else (c.t >= lo) & (c.t <= hi)
+                if not m.any():
+                    continue
+                x = (c.t[m] - lo) / grid_s
+                j = np.minimum(np.floor(x).astype(int), b - a - 1)
+                samples.append((ci, j, x - j, c.y[m], np.arange(self.count, self.count + int(m.sum()))))
+                self.count += int(m.sum())
+            if samples:
+                self.windows.append(_Window(int(a), int(b - a), samples))
+        if not self.windows:
+            raise IdentificationError(f"{data.file}: no {dof} output samples between {t0:g} and {t1:g} s")
+        self.channel_of = np.empty(self.count, dtype=int)
+        for w in self.windows:
+            for ci, _, _, _, idx in w.samples:
+                self.channel_of[idx] = ci
+
+    # parameter vector: free globals, then (p0, v0) per window
+    def model(self, theta: np.ndarray) -> DofModel:
+        return self.base.with_values(dict(zip(self.free, theta[:len(self.free)])))
+
+    def initial(self, base: DofModel) -> np.ndarray:
+        """Globals of ``base`` and each window's start from the first samples."""
+        th = [getattr(base, k) for k in self.free]
+        for w in self.windows:
+            pos = next(((j, a, y) for ci, j, a, y, _ in w.samples if self.channels[ci].kind == "position"), None)
+            vel = next(((j, a, y) for ci, j, a, y, _ in w.samples if self.channels[ci].kind == "velocity"), None)
+            p0 = float(pos[2][0]) if pos is not None else 0.0
+            v0 = float(vel[2][0]) if vel is not None else 0.0
+            if pos is not None and vel is None and pos[2].size >= 3:  # slope of the first samples
+                k = min(pos[2].size, 4)
+                tt = (pos[0][:k] + pos[1][:k]) * self.h
+                v0 = float(np.polyfit(tt, pos[2][:k], 1)[0])
+                p0 = float(np.polyval(np.polyfit(tt, pos[2][:k], 1), 0.0))
+            th += [p0, v0]
+        return np.array(th, dtype=float)
+
+    def _window_pred(self, model: DofModel, w: _Window, p0: float, v0: float) -> tuple[np.ndarray, np.ndarray]:
+        ps, vs = simulate(model, self.tau[w.i0:w.i0 + w.n], self.h, p0, v0)
+        return np.asarray(ps), np.asarray(vs)
+
+    def _fill(self, out: np.ndarray, w: _Window, ps: np.ndarray, vs: np.ndarray, weights: np.ndarray,
+              subtract: bool) -> None:
+        for ci, j, a, y, idx in w.samples:
+            src = ps if self.channels[ci].kind == "position" else vs
+            pred = (1.0 - a) * src[j] + a * src[j + 1]
+            out[idx] = ((y - pred) if subtract else pred) / weights[ci]
+
+    def residuals(self, theta: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        model = self.model(theta)
+        out = np.empty(self.count)
+        g = len(self.free)
+        for k, w in enumerate(self.windows):
+            ps, vs = self._window_pred(model, w, theta[g + 2 * k], theta[g + 2 * k + 1])
+            self._fill(out, w, ps, vs, weights, True)
+        return np.nan_to_num(out, nan=1e6, posinf=1e6, neginf=-1e6)
+
+    def predictions(self, theta: np.ndarray) -> np.ndarray:
+        """Model outputs at the samples (unweighted)."""
+        model = self.model(theta)
+        out = np.empty(self.count)
+        g = len(self.free)
+        ones = np.ones(len(self.channels))
+        for k, w in enumerate(self.windows):
+            ps, vs = self._window_pred(model, w, theta[g + 2 * k], theta[g + 2 * k + 1])
+            self._fill(out, w, ps, vs, ones, False)
+        return out
+
+    def jacobian(self, theta: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """d residuals / d theta: forward differences for the globals and v0; p0 exactly (-1 for
+        the positions: the dynamics do not depend on the position)."""
+        g = len(self.free)
+        J = np.zeros((self.count, theta.size))
+        base = self.predictions(theta) / weights[self.channel_of]
+        for i in range(g):
+            d = 1e-6 * max(abs(theta[i]), _SCALE[self.free[i]](self.base))
+            th = theta.copy()
+            th[i] += d
+            J[:, i] = -(self.predictions(th) / weights[self.channel_of] - base) / d
+        model = self.model(theta)
+        for k, w in enumerate(self.windows):
+            p0, v0 = theta[g + 2 * k], theta[g + 2 * k + 1]
+            for ci, _, _, _, idx in w.samples:
+                if self.channels[ci].kind == "position":
+                    J[idx, g + 2 * k] = -1.0 / weights[ci]
+            d = 1e-6 * max(abs(v0), 0.1)
+            ps0, vs0 = self._window_pred(model, w, p0, v0)
+            ps1, vs1 = self._window_pred(model, w, p0, v0 + d)
+            tmp0, tmp1 = np.zeros(self.count), np.zeros(self.count)
+            self._fill(tmp0, w, ps0, vs0, weights, False)
+            self._fill(tmp1, w, ps1, vs1, weights, False)
+            for _, _, _, _, idx in w.samples:
+                J[idx, g + 2 * k + 1] = -(tmp1[idx] - tmp0[idx]) / d
+        return J
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = [], []
+        for k in self.free:
+            lo.append({"added_mass": -50.0 * self.base.rigid, "linear": -np.inf, "quadratic": -np.inf,
+                       "net_buoyancy": -np.inf, "thrust_scale": 0.05}[k])
+            hi.append({"added_mass": 0.0, "linear": 0.0, "quadratic": 0.0, "net_buoyancy": np.inf,
+                       "thrust_scale": 20.0}[k])
+        n = 2 * len(self.windows)
+        return np.array(lo + [-np.inf] * n), np.array(hi + [np.inf] * n)
+
+
+_SCALE = {"added_mass": lambda b: 0.1 * b.rigid, "linear": lambda b: 1e-2 * b.rigid,
+          "quadratic": lambda b: 1e-2 * b.rigid, "net_buoyancy": lambda b: 0.1, "thrust_scale": lambda b: 1.0}
+
+
+def _held(data: DiveData, t: np.ndarray, col: int) -> np.ndarray:
+    """The input column held from each command time (0 before the first)."""
+    k = np.searchsorted(data.t_cmd, t + 1e-9, side="right") - 1
+    out = np.where(k >= 0, data.tau[np.maximum(k, 0), col], 0.0)
+    return out
+
+
+def _hac_covariance(J: np.ndarray, r: np.ndarray, channel_of: np.ndarray,
+                    order: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(Newey-West, white-noise) covariances of a least-squares estimate from its weighted
+    Jacobian J and residuals r; ``order``: per channel, the residual indices in time order."""
+    n, p = J.shape
+    JtJ = J.T @ J
+    inv = np.linalg.pinv(JtJ)
+    s2 = float(r @ r) / max(n - p, 1)
+    white = s2 * inv
+    S = np.zeros((p, p))
+    for idx in order:
+        if idx.size < 3:
+            continue
+        g = J[idx] * r[idx, None]  # score contributions, time-ordered
+        e = r[idx]
+        var = float(e @ e) / idx.size
+        lag_max = 1
+        for lag in range(1, min(idx.size // 4, 400)):  # up to where the autocorrelation dies out
+            rho = float(e[:-lag] @ e[lag:]) / (idx.size * var) if var > 0 else 0.0
+            if rho < 0.05:
+                lag_max = lag
+                break
+            lag_max = lag
+        L = 2 * lag_max
+        S += g.T @ g
+        for lag in range(1, min(L, idx.size - 1) + 1):
+            wgt = 1.0 - lag / (L + 1.0)
+            G = g[:-lag].T @ g[lag:]
+            S += wgt * (G + G.T)
+    return inv @ S @ inv, white
+
+
+# --------------------------------------------------------------------------------------------
+# Fit results
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class ParamResult:
+    key: str
+    name: str
+    unit: str
+    start: float  # the vehicle file's value
+    estimate: float
+    sigma: float
+    status: str  # "estimated", "held" (not free), "refused" (not determined: held at the file's value)
+    note: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class DofFit:
+    dof: str
+    params: tuple[ParamResult, ...]
+    correlation: np.ndarray  # among the estimated parameters, in the order of ``estimated``
+    estimated: tuple[str, ...]
+    model: DofModel  # with the estimates (refused / held: the file's values)
+    rms: Mapping[str, float]  # per channel, residual RMS (identification segment)
+    samples: Mapping[str, int]
+    speed_rms: float
+    speed_max: float
+    refused_dof: str = ""  # non-empty: the whole DOF was not identified, and why
+    windows: int = 0
+    cost_start: float = math.nan
+    cost: float = math.nan
+
+    def param(self, key: str) -> ParamResult:
+        return next(p for p in self.params if p.key == key)
+
+
+@dataclass(frozen=True, eq=False)
+class DiveFit:
+    file: str
+    fits: Mapping[str, DofFit]
+    ident_span: tuple[float, float]
+    valid_span: tuple[float, float]
+    prediction: Mapping[str, Mapping[str, list[float]]]  # output -> {"identified": [..], "file": [..], "n": [..]}
+    notes: tuple[str, ...] = ()
+
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"file": self.file, "identification_s": list(self.ident_span),
+                               "validation_s": list(self.valid_span), "notes": list(self.notes),
+                               "prediction_rmse": {k: dict(v) for k, v in self.prediction.items()},
+                               "prediction_step_s": PREDICTION_STEP_S, "horizons": list(HORIZONS)}
+        for dof, f in self.fits.items():
+            out[dof] = {"refused": f.refused_dof or None,
+                        "parameters": {p.name: {"estimate": p.estimate, "sigma": p.sigma, "start": p.start,
+                                                "status": p.status, "unit": p.unit, "note": p.note or None}
+                                       for p in f.params},
+                        "correlation": {"names": [NAMES[dof][k] for k in f.estimated],
+                                        "matrix": f.correlation.tolist()},
+                        "residual_rms": dict(f.rms), "samples": dict(f.samples),
+                        "speed_rms": f.speed_rms, "speed_max": f.speed_max}
+        return out
+
+
+def _manoeuvre(dof: str, key: str, speed_rms: float) -> str:
+    unit = "m/s" if dof == "heave" else "rad/s"
+    plan = f"rovlab lab plan-dive --dofs {dof}"
+    return {"added_mass": f"quick reversals of the {dof} thrust (holds of 0.5-2 s: accelerations, {plan})",
+            "linear": f"long holds at low {dof} speed (below {max(0.5 * speed_rms, 0.02):.2g} {unit}) as well as fast ones "
+                      f"({plan})",
+            "quadratic": f"{dof} speeds well above {max(2 * speed_rms, 0.1):.2g} {unit} ({plan})",
+            "net_buoyancy": "rests with the vertical thrusters at neutral (the plan's rests)",
+            "thrust_scale": "none from motion alone: a bollard/load-cell test of the thrusters (rovlab identify thrust)"}[key]
+
+
+def _hold_text(dof: str) -> str:
+    return {"heave": "heave (no depth change to speak of, or no depth column)",
+            "yaw": "yaw (no turning to speak of, or no heading column)"}[dof]
+
+
+def fit_dof(data: DiveData, dof: str, start: DofModel, t0: float, t1: float, *,
+            free: Sequence[str] = DEFAULT_FREE, max_rel: float = MAX_REL, grid_s: float = GRID_S,
+            window_s: float = WINDOW_S) -> DofFit:
+    """Output-error fit of one DOF on [t0, t1] (module docstring), with refusals."""
+    from scipy.optimize import least_squares
+
+    free = [k for k in KEYS if k in free and not (dof == "yaw" and k == "net_buoyancy")]
+    if "added_mass" in free and "thrust_scale" in free:
+        raise IdentificationError(f"{NAMES[dof]['added_mass']} and {NAMES[dof]['thrust_scale']} cannot both be "
+                                  "estimated: the motion responds to force / mass only, so no manoeuvre tells a "
+                                  "larger added mass from weaker thrust; hold one (measure the thrust with "
+                                  "rovlab identify thrust, or keep the file's added mass)")
+    pos = data.channel(dof, "position")
+    vel = data.channel(dof, "velocity")
+    speed = _speeds(pos, vel, t0, t1)
+    s_rms = float(np.sqrt(np.mean(speed**2))) if speed.size else 0.0
+    s_max = float(np.max(np.abs(speed))) if speed.size else 0.0
+    floor = 0.03 if dof == "heave" else 0.05  # m/s, rad/s (3 cm/s: the 2 Hz depth's noise over 1 s)
+    if pos is None or s_max < floor:
+        why = (f"the log does not excite {_hold_text(dof)}: the largest {dof} speed is "
+               f"{s_max:.3g} {'m/s' if dof == 'heave' else 'rad/s'} (need > {floor:g}); fly "
+               f"rovlab lab plan-dive --dofs {dof}")
+        return _refused_dof(dof, start, why, s_rms, s_max)
+    held: dict[str, str] = {}
+    prob = None
+    theta = None
+    while True:
+        cur = [k for k in free if k not in held]
+        prob = _Problem(data, dof, start, cur, t0, t1, grid_s=grid_s, window_s=window_s)
+        weights = prob.sigma.copy()
+        th0 = _start(prob, data, dof, start, weights, t0, t1)
+        lo, hi = prob.bounds()
+        th0 = _inside(th0, lo, hi, [_SCALE[k](start) for k in cur])
+        cost_start = 0.5 * float(np.sum(prob.residuals(th0, weights) ** 2))
+        for _ in range(2):  # ML with unknown noise levels: fit, re-weight by the residuals, fit again
+            sol = least_squares(lambda th, w=weights: prob.residuals(th, w), th0,
+                                jac=lambda th, w=weights: prob.jacobian(th, w), bounds=(lo, hi), x_scale="jac",
+                                method="trf", max_nfev=60)
+            th0 = sol.x
+            raw = prob.residuals(th0, np.ones(len(prob.channels)))
+            weights = np.array([max(float(np.sqrt(np.mean(raw[prob.channel_of == ci] ** 2))), 1e-9)
+                                if np.any(prob.channel_of == ci) else prob.sigma[ci]
+                                for ci in range(len(prob.channels))])
+        theta = th0
+        r = prob.residuals(theta, weights)
+        J = prob.jacobian(theta, weights)
+        # residual indices per channel, in time order (windows in order, samples in order within each)
+        order = [np.flatnonzero(prob.channel_of == ci) for ci in range(len(prob.channels))]
+        cov_hac, cov_white = _hac_covariance(J, r, prob.channel_of, order)
+        g = len(cur)
+        var = np.maximum(np.diag(cov_hac)[:g], np.diag(cov_white)[:g])
+        sig = np.sqrt(var)
+        model = prob.model(theta)
+        # refuse the worst-determined parameter, if any, and fit again without it
+        worst, worst_ratio = None, 1.0
+        for i, k in enumerate(cur):
+            ratio = _determination(k, model, sig[i], s_rms, max_rel)
+            if ratio > worst_ratio:
+                worst, worst_ratio = k, ratio
+        if worst is None:
+            break
+        held[worst] = (f"not determined by this log (sigma {sig[cur.index(worst)]:.3g}, "
+                       f"{worst_ratio * max_rel * 100:.0f} % of what it does); held at the file's value; "
+                       f"to determine it: {_manoeuvre(dof, worst, s_rms)}")
+        if len(held) == len(free):
+            return _refused_dof(dof, start, "no parameter is determined by this log: " +
+                                "; ".join(f"{NAMES[dof][k]}: {v}" for k, v in held.items()), s_rms, s_max,
+                                refused=held)
+    d = np.sqrt(np.maximum(np.diag(cov_hac)[:g], 1e-300))
+    corr = cov_hac[:g, :g] / np.outer(d, d)
+    params = []
+    for k in start.values():
+        name, unit = NAMES[dof][k], UNITS[dof][k]
+        if k in cur:
+            i = cur.index(k)
+            params.append(ParamResult(k, name, unit, float(getattr(start, k)), float(theta[i]), float(sig[i]),
+                                      "estimated", _at_bound(k, theta[i], lo[i], hi[i])))
+        elif k in held:
+            params.append(ParamResult(k, name, unit, float(getattr(start, k)), float(getattr(start, k)), math.nan,
+                                      "refused", held[k]))
+        else:
+            params.append(ParamResult(k, name, unit, float(getattr(start, k)), float(getattr(start, k)), math.nan,
+                                      "held", "held at the file's value (not asked for)"))
+    raw = prob.residuals(theta, np.ones(len(prob.channels)))
+    rms = {c.name: float(np.sqrt(np.mean(raw[prob.channel_of == ci] ** 2)))
+           for ci, c in enumerate(prob.channels) if np.any(prob.channel_of == ci)}
+    counts = {c.name: int(np.sum(prob.channel_of == ci)) for ci, c in enumerate(prob.channels)}
+    return DofFit(dof, tuple(params), corr, tuple(cur), model, rms, counts, s_rms, s_max, windows=len(prob.windows),
+                  cost_start=cost_start, cost=0.5 * float(r @ r))
+
+
+def _inside(th: np.ndarray, lo: np.ndarray, hi: np.ndarray, scale: Sequence[float]) -> np.ndarray:
+    """th moved strictly inside finite bounds (a zero damping guess starts slightly negative)."""
+    th = th.copy()
+    for i, sc in enumerate(scale):
+        if math.isfinite(hi[i]) and th[i] >= hi[i]:
+            th[i] = hi[i] - 1e-2 * sc
+        if math.isfinite(lo[i]) and th[i] <= lo[i]:
+            th[i] = lo[i] + 1e-2 * sc
+    return th
+
+
+def _at_bound(key: str, x: float, lo: float, hi: float) -> str:
+    if math.isfinite(hi) and key != "thrust_scale" and x >= hi - 1e-9 * max(1.0, abs(hi)):
+        return "at its bound 0 (dissipative / positive added mass enforced): the sigma is not meaningful"
+    return ""
+
+
+def _determination(key: str, model: DofModel, sigma: float, speed_rms: float, max_rel: float) -> float:
+    """sigma against what the parameter does, in units of max_rel (> 1: refuse)."""
+    if not math.isfinite(sigma):
+        return math.inf
+    v = max(speed_rms, 1e-3)
+    damp = abs(model.linear * v) + abs(model.quadratic * v * v) + abs(model.cubic * v**3)
+    if key == "added_mass":
+        return sigma / (max_rel * max(abs(model.added_mass), 1e-3 * model.rigid))
+    if key == "linear":
+        return sigma * v / (max_rel * max(damp, 1e-9))
+    if key == "quadratic":
+        return sigma * v * v / (max_rel * max(damp, 1e-9))
+    if key == "thrust_scale":
+        return sigma / MAX_SCALE_SIGMA
+    return 0.0  # net buoyancy: always reported with its sigma
+
+
+def _refused_dof(dof: str, start: DofModel, why: str, s_rms: float, s_max: float,
+                 refused: Mapping[str, str] | None = None) -> DofFit:
+    params = tuple(ParamResult(k, NAMES[dof][k], UNITS[dof][k], float(getattr(start, k)), float(getattr(start, k)),
+                               math.nan, "refused", (refused or {}).get(k, why)) for k in start.values())
+    return DofFit(dof, params, np.zeros((0, 0)), (), start, {}, {}, s_rms, s_max, refused_dof=why)
+
+
+def _speeds(pos: Channel | None, vel: Channel | None, t0: float, t1: float) -> np.ndarray:
+    if vel is not None:
+        m = (vel.t >= t0) & (vel.t <= t1)
+        return vel.y[m]
+    if pos is None:
+        return np.zeros(0)
+    m = (pos.t >= t0) & (pos.t <= t1)
+    if m.sum() < 8:
+        return np.zeros(0)
+    t, y = pos.t[m], pos.y[m]
+    from scipy.interpolate import make_smoothing_spline
+
+    spl = make_smoothing_spline(t, y)  # smoothing by generalised cross-validation
+    return spl.derivative()(t)
+
+
+def _start(prob: _Problem, data: DiveData, dof: str, start: DofModel, weights: np.ndarray, t0: float,
+           t1: float) -> np.ndarray:
+    """Equation-error start (constrained linear least squares), or the file's guess if that fits
+    the outputs better."""
+    cands = [prob.initial(start)]
+    ee = equation_error(data, dof, start, t0, t1, prob.free)
+    if ee is not None:
+        cands.append(prob.initial(ee))
+    costs = [float(np.sum(prob.residuals(c, weights) ** 2)) for c in cands]
+    return cands[int(np.argmin(costs))]
+
+
+def equation_error(data: DiveData, dof: str, start: DofModel, t0: float, t1: float,
+                   free: Sequence[str]) -> DofModel | None:
+    """Constrained least squares of the equation of motion on smoothed velocity and acceleration:
+    s tau = M a + (B - W) - lin v - quad |v| v - cubic v^3, with M >= m (added mass <= 0) and
+    damping <= 0; the parameters not in ``free`` held at ``start``. None when the data are too few."""
+    from scipy.interpolate import make_smoothing_spline
+    from scipy.optimize import lsq_linear
+
+    pos, vel = data.channel(dof, "position"), data.channel(dof, "velocity")
+    src = vel if vel is not None else pos
+    if src is None:
+        return None
+    m = (src.t >= t0) & (src.t <= t1)
+    if m.sum() < 20:
+        return None
+    t, y = src.t[m], src.y[m]
+    tg = np.arange(t[0] + 1.0, t[-1] - 1.0, 0.1)
+    if tg.size < 20:
+        return None
+    try:
+        spl = make_smoothing_spline(t, y)  # smoothing by generalised cross-validation
+    except ValueError:
+        return None
+    if vel is not None:
+        v, a = spl(tg), spl.derivative()(tg)
+    else:
+        v, a = spl.derivative()(tg), spl.derivative(2)(tg)
+    f = _held(data, tg, _DOF_INDEX[dof])
+    cols = {"added_mass": -a, "linear": -v, "quadratic": -np.abs(v) * v, "net_buoyancy": np.ones_like(v),
+            "thrust_scale": -f}
+    # s f - M a - nb + lin v + quad |v| v + cub v^3 = 0 with M = rigid - added
+    rhs = -(start.thrust_scale * f if "thrust_scale" not in free else 0.0) + start.rigid * a - start.cubic * v**3
+    known = {k: getattr(start, k) for k in KEYS if k not in free and not (dof == "yaw" and k == "net_buoyancy")}
+    for k, val in known.items():
+        if k != "thrust_scale":
+            rhs = rhs - cols[k] * val
+    names = [k for k in free]
+    A = np.column_stack([cols[k] for k in names])
+    lo = [{"added_mass": -50.0 * start.rigid, "linear": -np.inf, "quadratic": -np.inf, "net_buoyancy": -np.inf,
+           "thrust_scale": 0.05}[k] for k in names]
+    hi = [{"added_mass": 0.0, "linear": 0.0, "quadratic": 0.0, "net_buoyancy": np.inf, "thrust_scale": 20.0}[k]
+          for k in names]
+    try:
+        sol = lsq_linear(A, rhs, bounds=(lo, hi))
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    if not np.all(np.isfinite(sol.x)):
+        return None
+    return start.with_values(dict(zip(names, sol.x)))
+
+
+# --------------------------------------------------------------------------------------------
+# The whole dive: split, fit, validate
+# --------------------------------------------------------------------------------------------
+
+def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] = DOFS,
+                  free: Mapping[str, Sequence[str]] | Sequence[str] | None = None, split: float = 0.7,
+                  max_rel: float = MAX_REL) -> DiveFit:
+    """Identify heave and yaw from a dive (module docstring); ``split``: the share of the log used
+    to identify (the rest validates)."""
+    if not 0.2 <= split <= 0.95:
+        raise IdentificationError(f"split must be within 0.2 .. 0.95 (the share of the log used to identify), got {split}")
+    a, b = data.span
+    if b - a < 10.0:
+        raise IdentificationError(f"{data.file}: {b - a:.3g} s of data; a dive log needs at least a minute")
+    t_split = a + split * (b - a)
+    fits = {}
+    for dof in dofs:
+        if dof not in DOFS:
+            raise IdentificationError(f"DOF {dof!r}: identification from dives covers {', '.join(DOFS)} (surge and sway "
+                                      "need position or velocity in the log)")
+        chosen = free.get(dof, DEFAULT_FREE) if isinstance(free, Mapping) else (free or DEFAULT_FREE)
+        fits[dof] = fit_dof(data, dof, dof_model(vehicle, dof), a, t_split, free=chosen, max_rel=max_rel)
+    pred = prediction_errors(data, {d: f.model for d, f in fits.items() if not f.refused_dof},
+                             {d: dof_model(vehicle, d) for d in fits if not fits[d].refused_dof}, t_split, b)
+    return DiveFit(data.file, fits, (a, t_split), (t_split, b), pred, data.notes)
+
+
+def prediction_errors(data: DiveData, identified: Mapping[str, DofModel], start: Mapping[str, DofModel],
+                      t0: float, t1: float, *, step_s: float = PREDICTION_STEP_S,
+                      horizons: Sequence[int] = HORIZONS, every_s: float = 1.0) -> dict[str, dict[str, list[float]]]:
+    """k-step prediction RMSE of depth and heading on [t0, t1] against the measurements, from the
+    same initial states for every model (module docstring): heading and yaw rate from their latest
+    samples; depth and heave velocity from a smoothing spline of the depth samples of the segment
+    (the 2 Hz depth gives no velocity of its own: the spline's state is what motion capture's would
+    be in a tank)."""
+    from scipy.interpolate import make_smoothing_spline
+
+    out: dict[str, dict[str, list[float]]] = {}
+    for dof in identified:
+        models = (identified[dof], start[dof])
+        pos = data.channel(dof, "position")
+        vel = data.channel(dof, "velocity")
+        if pos is None:
+            continue
+        m = (pos.t >= t0) & (pos.t <= t1)
+        if m.sum() < 10:
+            continue
+        tm, ym = pos.t[m], pos.y[m]
+        # depth: the spline of every other sample gives the initial states, the others are the targets
+        # (a spline through the target itself would predict it from itself)
+        spl = make_smoothing_spline(tm[0::2], ym[0::2]) if vel is None else None
+        tgt = tm[1::2] if vel is None else tm
+        label = "depth_m" if dof == "heave" else "heading_rad"
+        rows: dict[str, list[float]] = {"identified": [], "file": [], "n": []}
+        step = float(np.median(np.diff(tgt)))
+        stride = max(1, int(round(every_s / max(step, 1e-3))))
+        for k in horizons:
+            horizon = k * step_s
+            errs: list[list[float]] = [[], []]
+            targets = tgt[(tgt >= t0 + horizon + 2.0) & (tgt <= tm[-1] - 1.0)][::stride]
+            for tt in targets:
+                ts = tt - horizon
+                if spl is not None:
+                    init = (float(spl(ts)), float(spl.derivative()(ts)))
+                else:
+                    assert vel is not None
+                    i = int(np.searchsorted(pos.t, ts + 1e-9)) - 1
+                    j = int(np.searchsorted(vel.t, ts + 1e-9)) - 1
+                    if i < 0 or j < 0:
+                        continue
+                    init = (float(pos.y[i] + vel.y[j] * (ts - pos.t[i])), float(vel.y[j]))
+                y = float(pos.y[np.searchsorted(pos.t, tt - 1e-9)])
+                n = max(1, int(round(horizon / GRID_S)))
+                tau = _held(data, ts + (horizon / n) * np.arange(n), _DOF_INDEX[dof]).tolist()
+                for i, mdl in enumerate(models):
+                    ps, _ = simulate(mdl, tau, horizon / n, init[0], init[1])
+                    errs[i].append(ps[-1] - y)
+            for i, key in enumerate(("identified", "file")):
+                e = np.asarray(errs[i])
+                rows[key].append(float(np.sqrt(np.mean(e**2))) if e.size else math.nan)
+            rows["n"].append(len(errs[0]))
+        out[label] = rows
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Vehicle-file edits
+# --------------------------------------------------------------------------------------------
+
+def dive_edits(fit: DiveFit, vehicle: Vehicle, *, digits: int = 4) -> dict[str, float]:
+    """Vehicle-file values of the estimated parameters (refused and held ones are not written;
+    thrust scales have no place in a vehicle file and are reported only)."""
+    edits: dict[str, float] = {}
+    for dof, f in fit.fits.items():
+        for p in f.params:
+            if p.status != "estimated":
+                continue
+            if p.key == "added_mass":
+                edits[f"added_mass.{p.name}"] = significant(p.estimate, digits)
+            elif p.key in ("linear", "quadratic"):
+                edits[f"damping.{dof}.{p.key}"] = significant(p.estimate, digits)
+            elif p.key == "net_buoyancy":  # B - W = rho g V - m g
+                vol = (p.estimate + vehicle.weight) / (vehicle.water_density * vehicle.gravity)
+                edits["restoring.displaced_volume"] = significant(vol, 6)
+    return edits
+
+
+def provenance(fit: DiveFit, log_name: str) -> dict[str, str]:
+    """Source notes per vehicle-file block: log, time span, method and standard deviations."""
+    a, b = fit.ident_span
+    blocks: dict[str, list[str]] = {}
+    for f in fit.fits.values():
+        for p in f.params:
+            if p.status != "estimated":
+                continue
+            block = {"added_mass": "added_mass", "linear": "damping", "quadratic": "damping",
+                     "net_buoyancy": "restoring"}.get(p.key)
+            if block:
+                blocks.setdefault(block, []).append(f"{p.name} sigma {p.sigma:.2g}")
+    head = (f"rovlab identify dive {log_name} (t {a:.1f}-{b:.1f} s; output error with Newey-West standard "
+            "deviations)")
+    return {blk: f"{head}: {', '.join(items)}" for blk, items in blocks.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# The virtual dive: a plan flown on a hidden vehicle
+# --------------------------------------------------------------------------------------------
+
+def hidden_vehicle(vehicle: Vehicle, seed: int, *, spread: float = 0.25, buoyancy_n: float = 2.0) -> Vehicle:
+    """A vehicle whose heave and yaw added mass and damping differ from ``vehicle``'s by up to
+    +-``spread`` (uniform, each), whose net buoyancy is off by up to +-``buoyancy_n`` N, and whose
+    zero linear damping (bluerov2_heavy's yaw: not published) becomes 20 % of the damping at
+    1 m/s or rad/s, so that every coefficient has a truth to find."""
+    rng = np.random.default_rng(seed)
+    am = np.array(vehicle.added_mass, dtype=float)
+    lin = np.array(vehicle.damping_linear, dtype=float)
+    quad = np.array(vehicle.damping_quadratic, dtype=float)
+    for i in (2, 3):
+        am[i] *= rng.uniform(1 - spread, 1 + spread)
+        if lin[i] == 0.0:
+            lin[i] = 0.2 * quad[i]
+        lin[i] *= rng.uniform(1 - spread, 1 + spread)
+        quad[i] *= rng.uniform(1 - spread, 1 + spread)
+    dv = rng.uniform(-buoyancy_n, buoyancy_n) / (vehicle.water_density * vehicle.gravity)
+    return vehicle.with_updates(name=f"{vehicle.name} (hidden, seed {seed})", added_mass=am, damping_linear=lin,
+                                damping_quadratic=quad, displaced_volume=vehicle.displaced_volume + dv)
+
+
+def truth_values(vehicle: Vehicle) -> dict[str, float]:
+    out = {}
+    for dof in DOFS:
+        for k, v in dof_model(vehicle, dof).values().items():
+            if k != "thrust_scale":
+                out[NAMES[dof][k]] = v
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Flight:
+    """What a flown plan logged: columns (time_s, pwm_<thruster>, sensor columns) and the truth."""
+
+    columns: Mapping[str, np.ndarray]
+    truth: Mapping[str, float]
+    guard_s: float  # seconds the depth guard held the excitation
+    depth_range: tuple[float, float]  # true depth reached
+    notes: tuple[str, ...] = ()
+    states: np.ndarray = field(default_factory=lambda: np.zeros((0, 9)))  # t, x(8): the true state per row
+
+
+def fly_plan(plan: Any, model: Vehicle, truth: Vehicle, *, seed: int | None = 0, noise: bool = True,
+             plant_step_s: float = 0.01, process_psd: Sequence[float] = (1e-2, 1e-6),
+             depth_rate_hz: float = 2.0, heading_rate_hz: float = 20.0, pwm_resolution_us: float = 1.0,
+             ahrs_tau_s: float = AHRS_TAU_S) -> Flight:
+    """Fly ``plan`` (rovlab.ident.plan.DivePlan) on ``truth`` with the allocation and the thrust
+    curves of ``model`` turning the wrench into PWM (module docstring). ``noise=False``: no sensor
+    or process noise (the planner's nominal flight). ``process_psd``: white force noise on heave
+    [N^2/Hz] and yaw [(N m)^2/Hz] (the packaged bluerov2-heavy-step scenario's values)."""
+    from rovlab.allocation.geometry import configuration_matrix
+    from rovlab.allocation.solvers import Allocator
+    from rovlab.core.angles import wrap as wrap_angle
+    from rovlab.models.kinetics import pack, rk4_inplace
+    from rovlab.models.thrusters import ThrusterBank
+
+    rng = np.random.default_rng(seed)
+    alloc = Allocator(model)
+    bank_true = ThrusterBank.from_vehicle(truth)
+    B_true = configuration_matrix(truth)
+    p = pack(truth)
+    sens = _sensor_channels(model)
+    if "depth" not in sens:
+        raise ValueError(f"vehicle {model.name!r} has no pressure sensor: a dive needs depth")
+    dt = float(plan.dt)
+    sub = int(round(dt / plant_step_s))
+    if sub < 1 or abs(sub * plant_step_s - dt) > 1e-9:
+        raise ValueError(f"the plan's command step {dt:g} s must be a multiple of the plant step {plant_step_s:g} s")
+    n_cmd = len(plan.Z)
+    h = plant_step_s
+    depth_every = int(round(1.0 / (depth_rate_hz * h)))
+    head_every = int(round(1.0 / (heading_rate_hz * h)))
+    x = np.zeros(8)
+    x[2] = plan.start_depth
+    x[3] = 0.3  # heading at the start [rad] (any)
+    f = np.zeros(4)
+    names = model.thruster_names
+    rows_t: list[float] = []
+    rows_pwm: list[np.ndarray] = []
+    rows: dict[str, list[float]] = {k: [] for k in ("depth", "heading", "rate")}
+    states: list[np.ndarray] = []
+    var_z = sens["depth"][3] if noise else 0.0
+    res_z = sens["depth"][4]
+    lz = float(model.sensor(sens["depth"][1]).position[2])
+    sd_psi = math.sqrt(sens["heading"][3]) if noise and "heading" in sens else 0.0
+    sd_r = math.sqrt(sens["rate"][3]) if noise and "rate" in sens else 0.0
+    phi = math.exp(-head_every * h / ahrs_tau_s)
+    ahrs = sd_psi * rng.standard_normal()
+    sd_proc = [math.sqrt(process_psd[0] / h), math.sqrt(process_psd[1] / h)] if noise else [0.0, 0.0]
+    flyer = plan.flyer()
+    z_meas = float(x[2] + lz)
+    guard_steps = 0
+    zmin, zmax = x[2], x[2]
+    pwm = np.full(len(names), 1500.0)
+    for k in range(n_cmd * sub):
+        if k % sub == 0:
+            tau, guarded = flyer.step(k // sub, z_meas - lz)
+            guard_steps += int(guarded)
+            res = alloc.allocate(np.asarray(tau, dtype=float))
+            pwm = res.pwm_us
+            if pwm_resolution_us > 0:
+                pwm = pwm_resolution_us * np.round(pwm / pwm_resolution_us)
+            f6 = B_true @ bank_true.force(pwm)
+            real = f6[[0, 1, 2, 5]]
+        t = k * h
+        if k % depth_every == 0 or k % head_every == 0 or k % sub == 0:
+            rows_t.append(t)
+            rows_pwm.append(pwm.copy())
+            states.append(np.concatenate([[t], x]))
+            z_new = math.nan
+            if k % depth_every == 0:
+                z_new = x[2] + lz + math.sqrt(var_z) * rng.standard_normal()
+                if res_z > 0:
+                    z_new = res_z * round(z_new / res_z)
+                z_meas = z_new
+            rows["depth"].append(z_new)
+            if k % head_every == 0 and "heading" in sens:
+                ahrs = phi * ahrs + sd_psi * math.sqrt(1 - phi * phi) * rng.standard_normal()
+                rows["heading"].append(float(wrap_angle(x[3] + ahrs)))
+                rows["rate"].append(x[7] + sd_r * rng.standard_normal())
+            else:
+                rows["heading"].append(math.nan)
+                rows["rate"].append(math.nan)
+        f[0], f[1] = real[0], real[1]
+        f[2] = real[2] + sd_proc[0] * rng.standard_normal()
+        f[3] = real[3] + sd_proc[1] * rng.standard_normal()
+        rk4_inplace(p, x, f, h)
+        zmin, zmax = min(zmin, x[2]), max(zmax, x[2])
+    cols: dict[str, np.ndarray] = {"time_s": np.array(rows_t)}
+    P = np.array(rows_pwm)
+    for i, n in enumerate(names):
+        cols[f"pwm_{n}"] = P[:, i]
+    for key in ("depth", "heading", "rate"):
+        if key in sens:
+            cols[sens[key][0]] = np.array(rows[key])
+    notes = (f"depth {sens['depth'][0]} at {depth_rate_hz:g} Hz (variance {sens['depth'][3]:.3g} m^2, resolution "
+             f"{res_z:g} m); AHRS heading at {heading_rate_hz:g} Hz with a Gauss-Markov error ({ahrs_tau_s:g} s); "
+             f"PWM quantised to {pwm_resolution_us:g} us; process noise PSD heave {process_psd[0]:g} N^2/Hz, yaw "
+             f"{process_psd[1]:g} (N m)^2/Hz" if noise else "no noise (nominal flight)",)
+    return Flight(cols, truth_values(truth), guard_steps * dt, (float(zmin), float(zmax)), notes, np.array(states))
