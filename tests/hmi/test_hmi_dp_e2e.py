@@ -1,6 +1,7 @@
 """Dynamic positioning in the HMI, in a real headless browser (Debian's Chromium via Playwright,
 as tests/hmi/test_hmi_e2e.py; skipped without it, except in CI): a DP scenario shows north/east
-set-point fields and a live xy track, and a set-point typed on the page reaches the loop."""
+set-point fields and a live xy track, and a set-point typed on the page reaches the loop; no label
+of the side panel is cut."""
 
 from __future__ import annotations
 
@@ -34,12 +35,14 @@ def test_dp_set_points_and_the_live_xy_track(tmp_path, browser, artifacts, hmi_s
                 const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data; let n = 0;
                 for (let i = 0; i < d.length; i += 4) if (d[i] < 200 && d[i + 3] > 0) n++; return n; })()""")
             assert inked > 300
-            # a set-point typed on the page reaches the loop
-            # (both fields in one turn of the page: a state update between two fills re-renders the
-            # field that lost focus, as it should for a user who has not pressed Set)
-            page.evaluate("""() => { document.querySelector('#ref-north').value = '1.25';
-                document.querySelector('#ref-east').value = '-0.75';
-                document.querySelector('#ref-set').click(); }""")
+            # a set-point typed on the page reaches the loop, both fields even with a live refresh
+            # between typing them (issue 28: the refresh put the live value back into the field
+            # that had lost the focus, and Set sent the other one only)
+            page.fill("#ref-north", "1.25")
+            page.fill("#ref-east", "-0.75")
+            page.evaluate("() => { window.__state0 = hmi.state; }")
+            page.wait_for_function("() => hmi.state !== window.__state0", timeout=WAIT_MS)
+            page.click("#ref-set")
             hmi_wait(lambda: (hmi_state(server)["reference"]["north_m"], hmi_state(server)["reference"]["east_m"])
                      == (1.25, -0.75), "the north/east set-point in the loop")
             assert hmi_state(server)["reference"]["schedule"] is False
@@ -50,6 +53,22 @@ def test_dp_set_points_and_the_live_xy_track(tmp_path, browser, artifacts, hmi_s
                                    timeout=WAIT_MS)
             assert "bad" in (page.get_attribute("#ref-north", "class") or "")
             page.screenshot(path=str(artifacts / "dp-track.png"))
+            # no label, unit or selector of any tab is cut (issue 28: the Observer tab's were,
+            # e.g. "spread a returning sensor'..."); DP has the most fields of any scenario
+            for tab in ("run", "vehicle", "truth", "observer", "lqr", "files"):
+                page.click(f"#tabs button[data-tab={tab}]")
+                cut = page.evaluate("""() => [...document.querySelectorAll(
+                        '.tab:not([hidden]) .field-label, .tab:not([hidden]) .unit, .tab:not([hidden]) h4')]
+                    .filter((e) => e.scrollWidth > e.clientWidth + 1 || e.scrollHeight > e.clientHeight + 1)
+                    .map((e) => e.textContent)""")
+                assert cut == [], (tab, cut)
+                overflow = page.evaluate("""() => { const p = document.querySelector('aside.panel');
+                    return [...p.querySelectorAll('.tab:not([hidden]) *')].filter((e) => e.offsetParent !== null
+                        && e.getBoundingClientRect().right > p.getBoundingClientRect().right + 0.5
+                        && !e.closest('.matrix')).map((e) => e.tagName + ' ' + (e.textContent || '').slice(0, 40)); }""")
+                assert overflow == [], (tab, overflow)
+                if tab == "observer":
+                    page.locator("aside.panel").screenshot(path=str(artifacts / "observer-tab.png"))
         finally:
             context.close()
     finally:

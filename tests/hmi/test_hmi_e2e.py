@@ -265,3 +265,85 @@ def test_controls_start_pause_reset_speed_and_export(page, server):
     names = p.eval_on_selector_all("#exported li a", "els => els.map(e => e.textContent)")
     assert any(n.endswith(".csv") for n in names) and any(n.endswith("-events.json") for n in names)
     assert page.errors == []
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 28: what a new user hit on the Run tab and in the heading plot
+# --------------------------------------------------------------------------------------------
+
+def _next_state_frame(p):
+    """Wait for the next state frame (the server sends one a second): the live refresh of the page."""
+    p.evaluate("() => { window.__state0 = hmi.state; }")
+    p.wait_for_function("() => hmi.state !== window.__state0", timeout=WAIT_MS)
+
+
+def test_set_sends_every_edited_reference_and_the_refresh_keeps_what_was_typed(page, server):
+    p = page.page
+    page.tab("run")
+    # the step scenario's LQG holds depth and heading: no north/east fields (they used to show, and
+    # what was typed there went nowhere)
+    assert not p.locator("#ref-north").is_visible() and not p.locator("#ref-east").is_visible()
+    p.fill("#ref-depth", "0.45")
+    p.fill("#ref-heading", "-45")  # the focus moves on: depth is no longer focused
+    _next_state_frame(p)
+    # the refresh used to put the live 0.7 back into the unfocused depth field, so Set sent the heading only
+    assert p.input_value("#ref-depth") == "0.45" and "edited" in (p.get_attribute("#ref-depth", "class") or "")
+    assert p.get_attribute("#ref-depth", "placeholder") == "0.7"  # the live value stays in view
+    p.click("#ref-set")
+    _wait(lambda: _state(server)["reference"]["depth_m"] == 0.45
+          and abs(_state(server)["reference"]["heading_deg"] + 45) < 1e-9, what="depth and heading in the loop")
+    # an absurd heading is refused with the server's reason under the fields, nothing changes
+    p.fill("#ref-heading", "1e308")
+    p.press("#ref-heading", "Enter")
+    p.wait_for_function("() => document.querySelector('#ref-msg').textContent.includes("
+                        "'heading_deg must be within -720 .. 720 deg')", timeout=WAIT_MS)
+    assert "bad" in p.get_attribute("#ref-heading", "class")
+    _next_state_frame(p)
+    assert p.input_value("#ref-heading") == "1e308"  # kept for correction, not replaced by the refresh
+    assert abs(_state(server)["reference"]["heading_deg"] + 45) < 1e-9
+    page.shot("reference-refused")
+    p.press("#ref-heading", "Escape")  # cancel the edit: the live value comes back
+    assert p.input_value("#ref-heading") == "-45"
+    assert page.errors == []
+
+
+_PLOT_PAGE = "<!doctype html><html><body><canvas id=c style='width:600px;height:240px;display:block'></canvas></body></html>"
+_HEADING = """(values) => {
+    const c = new RovPlot.StripChart(document.getElementById('c'), {title: 'heading', unit: 'deg', minSpan: 2,
+                                                                    period: 360});
+    c.add({name: 'band', kind: 'band'}); c.add({name: 'est'}); c.add({name: 'meas', kind: 'dots'});
+    c.add({name: 'ref', kind: 'step'});
+    const wrap = (a) => a - 360 * Math.ceil((a - 180) / 360);  // as the messages give it: (-180, 180]
+    values.forEach((v, k) => { const t = 0.1 * k, w = wrap(v);
+        c.push('est', t, w); c.pushBand('band', t, w - 1, w + 1); c.push('meas', t, wrap(v + 0.3)); c.push('ref', t, 180); });
+    const labels = [];
+    const fill = c.ctx.fillText.bind(c.ctx);
+    c.ctx.fillText = (text, x, y) => { labels.push(text); fill(text, x, y); };
+    c.draw();
+    return {view: c.view, labels: labels.filter((s) => /^-?[0-9.]+$/.test(s)).map(Number).filter((_, i, a) => i < a.length)};
+}"""
+
+
+def test_a_heading_about_180_deg_is_one_line_and_a_full_turn_is_not_drawn_across_the_plot(browser):
+    plot_js = (Path(__file__).resolve().parents[2] / "src/rovlab/interfaces/hmi/static/plot.js").read_text()
+    context = browser.new_context(viewport={"width": 700, "height": 300})
+    try:
+        p = context.new_page()
+        p.set_content(_PLOT_PAGE)
+        p.add_script_tag(content=plot_js)
+        # held at 180 deg: the truth dithers across +-180 (the messages wrap it); it used to be drawn
+        # as 360 deg steps on a chart spanning -180 .. 180
+        import math
+        held = [180.0 + 1.5 * math.sin(0.7 * k) for k in range(300)]
+        out = p.evaluate(_HEADING, held)
+        view = out["view"]
+        assert view["y1"] - view["y0"] < 10 and view["breaks"] == 0, view
+        assert abs(abs(view["center"]) - 180) < 2
+        ticks = [x for x in out["labels"] if abs(x) > 100]  # the y labels (time labels are 0 .. 30 s)
+        assert ticks and all(-180 < x <= 180 for x in ticks) and min(ticks) < 0 < max(ticks), ticks
+        # two full turns in 60 s: the line leaves at one edge and comes back at the other
+        turning = [12.0 * 0.1 * k for k in range(600)]
+        view = p.evaluate(_HEADING, turning)["view"]
+        assert view["breaks"] >= 2 and view["y1"] - view["y0"] <= 1.2 * 360, view  # the estimate and its band
+    finally:
+        context.close()

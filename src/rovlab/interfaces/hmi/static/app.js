@@ -177,7 +177,7 @@
   const PWM_COLORS = ["#2f6fd6", "#e58a12", "#2e9d4f", "#d0342c", "#8a4fd1", "#8c6d31", "#16a0a8", "#b0407a"];
   const STATE_CHARTS = {
     z: { title: "depth z", unit: "m", k: 1, minSpan: 0.02 },
-    psi: { title: "heading ψ", unit: "deg", k: DEG, minSpan: 2 },
+    psi: { title: "heading ψ", unit: "deg", k: DEG, minSpan: 2, period: 360 }, // an angle: drawn unwrapped (plot.js)
     w: { title: "heave velocity w", unit: "m/s", k: 1, minSpan: 0.02 },
     r: { title: "yaw rate r", unit: "deg/s", k: DEG, minSpan: 1 },
     b_w: { title: "heave bias b_w", unit: "N", k: 1, minSpan: 0.5 },
@@ -416,39 +416,77 @@
   }
 
   const REF_FIELDS = [["ref-north", "north_m"], ["ref-east", "east_m"], ["ref-depth", "depth_m"], ["ref-heading", "heading_deg"]];
-  function positionControl() { return hmi.source && hmi.source.controller === "dp"; }
+  // fields the user typed into and has not sent yet: the live refresh leaves them alone, and Set
+  // sends every one of them (not only the one that had the focus)
+  const refEdited = new Set();
+  hmi.refEdited = refEdited;
+  // the running controller holds a north/east position (the source says which references it follows)
+  function positionControl() {
+    const refs = (hmi.source && hmi.source.references) || [];
+    return refs.includes("x") && refs.includes("y");
+  }
 
   function renderReference() {
     const ref = hmi.state.reference;
     const dp = positionControl();
     for (const id of ["ref-north-label", "ref-east-label"]) $(id).hidden = !dp;
+    if (!dp) { refEdited.delete("ref-north"); refEdited.delete("ref-east"); }
     $("ref-now").textContent = "now " + (dp ? `north ${short(ref.north_m, 3)} m, east ${short(ref.east_m, 3)} m, ` : "") +
       `${short(ref.depth_m, 3)} m, ${short(ref.heading_deg, 3)}° ` + (ref.schedule ? "(scenario schedule)" : "(set by hand)");
     for (const [id, key] of REF_FIELDS) {
       const v = ref[key];
       if (v === undefined) continue;
       const input = $(id);
-      if (document.activeElement !== input && !input.classList.contains("bad")) input.value = short(v, 4);
+      const live = short(v, 4);
+      input.placeholder = live;
+      input.title = `in the loop now: ${live}`;
+      if (refEdited.has(id) || document.activeElement === input) continue;
+      input.value = live;
+      input.classList.remove("bad");
     }
+  }
+
+  function editReference(id) {
+    const input = $(id);
+    if (input.value.trim() === "") refEdited.delete(id); else refEdited.add(id);
+    input.classList.toggle("edited", refEdited.has(id));
+  }
+
+  function cancelReferenceEdit(id) {
+    refEdited.delete(id);
+    $(id).classList.remove("edited", "bad");
+    $("ref-msg").textContent = "";
+    if (hmi.state) renderReference();
   }
 
   function setReference() {
     const args = {};
+    const sent = [];
     for (const [id, key] of REF_FIELDS) {
-      if ((key === "north_m" || key === "east_m") && !positionControl()) continue;
+      if (!refEdited.has(id)) continue;
       const raw = $(id).value.trim();
       if (raw === "") continue;
       const v = Number(raw);
-      args[key] = isFinite(v) ? v : raw; // the server explains what is wrong with text
+      args[key] = isFinite(v) ? v : raw; // the server explains what is wrong with text or infinity
+      sent.push(id);
     }
     const m = $("ref-msg");
+    m.classList.remove("okmsg");
+    if (!sent.length) {
+      m.textContent = "type a new value first (the fields show the set-point in the loop now)";
+      return;
+    }
     send("reference", args).then(() => {
       m.textContent = "";
-      for (const [id] of REF_FIELDS) $(id).classList.remove("bad");
+      for (const id of sent) {
+        refEdited.delete(id);
+        $(id).classList.remove("bad", "edited");
+        if (document.activeElement === $(id)) $(id).blur(); // the state frame that follows shows the loop's value
+      }
     }).catch((e) => {
       m.textContent = e.message;
       const hit = REF_FIELDS.find(([, key]) => key === e.key);
-      $(hit ? hit[0] : "ref-depth").classList.add("bad");
+      if (hit) $(hit[0]).classList.add("bad");
     });
   }
 
@@ -650,7 +688,7 @@
           optional: true, label: `${id} variance`,
           placeholder: () => {
             const name = hmi.loop && Object.keys(hmi.loop.R).find((n) => n.endsWith("." + known.quantity) && (known.sensor ? n.startsWith(known.sensor + ".") : true));
-            return name ? "in use: " + short(hmi.loop.R[name], 3) : "";
+            return name ? "in use: " + short(hmi.loop.R[name], 2) : "";
           },
         }, msgBox);
         grid.append(label, f.input, el("span", { class: "unit", text: unit }));
@@ -710,6 +748,8 @@
         .catch((e) => { toast(e.message, true); ev.target.value = current; }),
     }, ...known.map((c) => el("option", { value: c.name, text: c.description ? `${c.name}: ${c.description}` : c.name })));
     sel.value = current;
+    const chosen = known.find((c) => c.name === current);
+    if (chosen && chosen.description) sel.title = `${chosen.name}: ${chosen.description}`; // in full (the box may cut it)
     box.appendChild(sel);
     const running = hmi.loop && hmi.loop.controller;
     if (running === "mrac") mracForm(box);
@@ -1010,8 +1050,12 @@
     $("btn-reset").addEventListener("click", () => send("reset").catch((e) => toast(e.message, true)));
     $("speed").addEventListener("change", (ev) => send("speed", { value: Number(ev.target.value) }).catch((e) => toast(e.message, true)));
     $("ref-set").addEventListener("click", setReference);
-    for (const id of ["ref-north", "ref-east", "ref-depth", "ref-heading"]) {
-      $(id).addEventListener("keydown", (ev) => { if (ev.key === "Enter") setReference(); });
+    for (const [id] of REF_FIELDS) {
+      $(id).addEventListener("input", () => editReference(id));
+      $(id).addEventListener("keydown", (ev) => {
+        if (ev.key === "Enter") setReference();
+        if (ev.key === "Escape") { $(id).blur(); cancelReferenceEdit(id); }
+      });
     }
     $("ref-schedule").addEventListener("click", () => send("reference", { schedule: true }).catch((e) => toast(e.message, true)));
     for (const b of document.querySelectorAll("[data-save]")) b.addEventListener("click", () => save(b.dataset.save, false));

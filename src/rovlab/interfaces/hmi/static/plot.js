@@ -7,6 +7,14 @@
 //   band  - a filled region between lo and hi (e.g. estimate +/- 2 sigma)
 // Samples go into fixed-size ring buffers (push is O(1), no allocation); draw() renders the
 // visible part with an automatic y range. Call draw() from requestAnimationFrame.
+//
+// An angle (option period, e.g. 360 for a heading in degrees) is drawn unwrapped about the
+// circular mean of the visible samples: every sample is shown as the value nearest that centre
+// (a heading dithering about +-180 deg is one line near 180, not a 360 deg step and a chart
+// spanning -180..180), tick labels are the wrapped angles (..., 170, 180, -170, ...), and where a
+// series still passes the far side (a full turn) its line leaves the plot at one edge and comes
+// back at the other, never drawn across it. The same mapping holds for every series of the
+// chart (truth, estimate and its band, measurements, reference).
 "use strict";
 
 (function (global) {
@@ -89,12 +97,45 @@
       this.unit = opts.unit || "";
       this.window = opts.window || 60;
       this.minSpan = opts.minSpan || 1e-9;
+      this.period = opts.period || 0; // an angle's period (360 for degrees); 0: not an angle
+      this.center = 0; // the period's centre used in the last draw (see unwrap)
       this.series = [];
       this.byName = {};
       this.now = 0;
       this.dirty = true;
       this.cssWidth = 0;
       this.cssHeight = 0;
+      this.view = null; // what the last draw showed: {t0, t1, y0, y1, center, breaks} (tests read it)
+      this.breaks = 0;
+    }
+    // an angle as drawn: the value nearest this.center (identity when the chart is not an angle)
+    unwrap(v) {
+      const P = this.period;
+      return P ? v - P * Math.round((v - this.center) / P) : v;
+    }
+    // the circular mean of the visible samples (the band's middles if there is nothing else)
+    circularCenter(t0, t1) {
+      const P = this.period;
+      let sx = 0, sy = 0, n = 0;
+      for (const bands of [false, true]) {
+        for (const s of this.series) {
+          if ((s.kind === "band") !== bands) continue;
+          const r = s.ring;
+          for (let k = r.lowerBound(t0); k < r.length; k++) {
+            const i = r.index(k);
+            if (r.t[i] > t1) break;
+            const v = r.width > 1 ? 0.5 * (r.v[i * 2] + r.v[i * 2 + 1]) : r.v[i];
+            const a = 2 * Math.PI * v / P;
+            sx += Math.cos(a); sy += Math.sin(a); n++;
+          }
+        }
+        if (n) break;
+      }
+      return n && (sx * sx + sy * sy) > 1e-18 ? Math.atan2(sy, sx) * P / (2 * Math.PI) : this.center;
+    }
+    tickLabel(v) {  // an angle's tick label: wrapped into (-P/2, P/2]
+      const P = this.period;
+      return P ? v - P * Math.ceil((v - P / 2) / P - 1e-12) : v;
     }
     add(opts) {
       const s = new Series(opts);
@@ -145,8 +186,12 @@
         for (let k = r.lowerBound(t0); k < r.length; k++) {
           const i = r.index(k);
           if (r.t[i] > t1) break;
-          for (let j = 0; j < r.width; j++) {
-            const v = r.v[i * r.width + j];
+          if (r.width > 1) {  // a band: its middle unwrapped, its width kept
+            const a = r.v[2 * i], b = r.v[2 * i + 1], m = this.unwrap(0.5 * (a + b)), h = 0.5 * (b - a);
+            if (m - h < lo) lo = m - h;
+            if (m + h > hi) hi = m + h;
+          } else {
+            const v = this.unwrap(r.v[i]);
             if (v < lo) lo = v;
             if (v > hi) hi = v;
           }
@@ -208,6 +253,7 @@
       const first = this.firstTime();
       const t1 = Math.max(this.now, (isFinite(first) ? first : 0) + this.window);
       const t0 = t1 - this.window;
+      if (this.period) this.center = this.circularCenter(t0, t1);
       const [y0, y1] = this.yRange(t0, t1);
       const X = (t) => left + (t - t0) / (t1 - t0) * pw;
       const Y = (v) => top + (1 - (v - y0) / (y1 - y0)) * ph;
@@ -227,7 +273,8 @@
       for (let v = Math.ceil(y0 / ys) * ys; v <= y1; v += ys) {
         const y = Math.round(Y(v)) + 0.5;
         ctx.moveTo(left, y); ctx.lineTo(left + pw, y);
-        ctx.fillText(fmt(Math.abs(v) < ys * 1e-6 ? 0 : v, ys), left - 5, y);
+        const label = this.tickLabel(v);
+        ctx.fillText(fmt(Math.abs(label) < ys * 1e-6 ? 0 : label, ys), left - 5, y);
       }
       const xs = niceStep(this.window, Math.max(2, Math.floor(pw / 70)));
       ctx.textAlign = "center";
@@ -250,8 +297,10 @@
       ctx.beginPath();
       ctx.rect(left, top, pw, ph);
       ctx.clip();
+      this.breaks = 0;
       for (const s of this.series) this.drawSeries(s, t0, t1, X, Y);
       ctx.restore();
+      this.view = { t0, t1, y0, y1, center: this.center, breaks: this.breaks };
 
       // title (with unit) and legend
       ctx.textBaseline = "alphabetic";
@@ -282,32 +331,40 @@
       return true;
     }
     drawSeries(s, t0, t1, X, Y) {
-      const ctx = this.ctx, r = s.ring;
+      const ctx = this.ctx, r = s.ring, P = this.period;
       if (!r.length) return;
       const k0 = Math.max(0, r.lowerBound(t0) - 1);
       if (s.kind === "band") {
+        // one polygon per stretch without a wrap of its (unwrapped) middle
         ctx.fillStyle = s.fill;
-        ctx.beginPath();
-        let started = false;
-        const idx = [];
-        for (let k = k0; k < r.length; k++) idx.push(r.index(k));
-        for (const i of idx) {
-          const x = X(r.t[i]), y = Y(r.v[2 * i + 1]);
-          if (!started) { ctx.moveTo(x, y); started = true; } else ctx.lineTo(x, y);
+        let idx = [], prevM = NaN;
+        const fill = () => {
+          if (!idx.length) return;
+          ctx.beginPath();
+          for (let j = 0; j < idx.length; j++) {
+            const [x, , hi] = idx[j];
+            if (j === 0) ctx.moveTo(x, Y(hi)); else ctx.lineTo(x, Y(hi));
+          }
+          for (let j = idx.length - 1; j >= 0; j--) ctx.lineTo(idx[j][0], Y(idx[j][1]));
+          ctx.closePath();
+          ctx.fill();
+          idx = [];
+        };
+        for (let k = k0; k < r.length; k++) {
+          const i = r.index(k);
+          const a = r.v[2 * i], b = r.v[2 * i + 1], m = this.unwrap(0.5 * (a + b)), h = 0.5 * (b - a);
+          if (P && Math.abs(m - prevM) > P / 2) { fill(); this.breaks++; }
+          idx.push([X(r.t[i]), m - h, m + h]);
+          prevM = m;
         }
-        for (let j = idx.length - 1; j >= 0; j--) {
-          const i = idx[j];
-          ctx.lineTo(X(r.t[i]), Y(r.v[2 * i]));
-        }
-        ctx.closePath();
-        ctx.fill();
+        fill();
         return;
       }
       if (s.kind === "dots") {
         ctx.fillStyle = s.color;
         for (let k = k0; k < r.length; k++) {
           const i = r.index(k);
-          ctx.fillRect(X(r.t[i]) - 1.25, Y(r.v[i]) - 1.25, 2.5, 2.5);
+          ctx.fillRect(X(r.t[i]) - 1.25, Y(this.unwrap(r.v[i])) - 1.25, 2.5, 2.5);
         }
         return;
       }
@@ -316,17 +373,24 @@
       ctx.lineJoin = "round";
       ctx.setLineDash(s.dash || []);
       ctx.beginPath();
-      let prevT = NaN, prevY = NaN;
+      let prevT = NaN, prevV = NaN;
       for (let k = k0; k < r.length; k++) {
         const i = r.index(k);
-        const x = X(r.t[i]), y = Y(r.v[i]);
-        if (isNaN(prevT) || r.t[i] < prevT) ctx.moveTo(x, y);
-        else if (s.kind === "step") { ctx.lineTo(x, prevY); ctx.lineTo(x, y); }
-        else ctx.lineTo(x, y);
-        prevT = r.t[i];
-        prevY = y;
+        const t = r.t[i], v = this.unwrap(r.v[i]), x = X(t);
+        if (isNaN(prevT) || t < prevT) ctx.moveTo(x, Y(v));
+        else if (P && Math.abs(v - prevV) > P / 2) {
+          // the angle passed the far side of the centre: leave at one edge, come back at the other
+          this.breaks++;
+          const shift = P * Math.round((v - prevV) / P); // v - shift is the continuation of prevV
+          if (s.kind === "step") { ctx.lineTo(x, Y(prevV)); ctx.moveTo(x, Y(v)); }
+          else { ctx.lineTo(x, Y(v - shift)); ctx.moveTo(X(prevT), Y(prevV + shift)); ctx.lineTo(x, Y(v)); }
+        }
+        else if (s.kind === "step") { ctx.lineTo(x, Y(prevV)); ctx.lineTo(x, Y(v)); }
+        else ctx.lineTo(x, Y(v));
+        prevT = t;
+        prevV = v;
       }
-      if (s.kind === "step" && !isNaN(prevT)) ctx.lineTo(X(Math.max(prevT, this.now)), prevY);
+      if (s.kind === "step" && !isNaN(prevT)) ctx.lineTo(X(Math.max(prevT, this.now)), Y(prevV));
       ctx.stroke();
       ctx.setLineDash([]);
     }
