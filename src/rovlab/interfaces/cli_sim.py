@@ -180,12 +180,20 @@ def _simulate(args: argparse.Namespace, data, file, out: Path) -> int:
         result, metrics = _run(data, file, args.seed)
         notes: list[str] = []
         sc = result.scenario
+        written: list[bool] = []
+
+        def meanwhile() -> None:
+            _write(out, result, metrics, notes, figures=figures)
+            written.append(True)
+
         summary = _monte_carlo(data, file, sc.seed, args.runs, args.workers, args.backend, args.scheduler, out,
-                               result, metrics, notes, figures=figures,
-                               meanwhile=lambda: _write(out, result, metrics, notes, figures=figures))
+                               result, metrics, notes, figures=figures, meanwhile=meanwhile)
         print(f"{sc.name} (seed {sc.seed}, {sc.plant} plant, {sc.duration_s:g} s) -> {out}/")
         _print_mc(summary)
         interrupted = bool(summary.get("interrupted"))
+        if interrupted and not written:
+            notes.append(f"Ctrl-C came while seed {sc.seed}'s own files were being written: its figures and "
+                         f"report.html may be missing (rovlab simulate {sc.name} --seed {sc.seed} writes them)")
     else:
         result, metrics, notes = _run_and_write(data, file, args.seed, out, figures=figures)
         sc = result.scenario
@@ -248,24 +256,29 @@ def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path,
     done = run_many(data, file, seeds, workers=workers, backend=backend, scheduler=scheduler,
                     progress=Progress(f"Monte Carlo {result.scenario.name}"), meanwhile=meanwhile)
     wall = time.perf_counter() - t0
+    if len(done) < runs:  # Ctrl-C: run_many ended the workers and kept the runs that had finished
+        print(f"\ninterrupted: {len(done)} of {runs} runs finished; writing their statistics"
+              + (" and figures" if figures else "") + f" to {out}/", file=sys.stderr, flush=True)
     summary = summarise_runs(done)
     summary["wall_time_s"] = wall
+    summary["runs_requested"] = runs
     summary["interrupted"] = len(done) < runs
     n_plant = len(result.columns["time_s"]) * int(result.meta["sample_time_s"] / result.meta["plant_step_s"] + 0.5)
     summary["vehicle_steps_per_s"] = len(done) * n_plant / wall if wall > 0 else None
-    write_monte_carlo(out / "monte_carlo", result.scenario.name, summary, done, result.columns["time_s"], notes=notes,
-                      figures=figures)
     metrics = dict(metrics)
     metrics["monte_carlo"] = summary
-    write_json(out / "metrics.json", metrics)
+    write_json(out / "metrics.json", metrics)  # the numbers first: a Ctrl-C while the figure is drawn keeps them
+    write_monte_carlo(out / "monte_carlo", result.scenario.name, summary, done, result.columns["time_s"], notes=notes,
+                      figures=figures)
     return summary
 
 
 def _print_mc(summary: dict[str, Any]) -> None:
     n = summary["runs"]
-    print(f"Monte Carlo: {n} runs in {summary['wall_time_s']:.2f} s"
+    asked = summary.get("runs_requested", n)
+    print(f"Monte Carlo: {n if n == asked else f'{n} of {asked}'} runs in {summary['wall_time_s']:.2f} s"
           + (f" ({summary['vehicle_steps_per_s'] / 1e6:.3g} M vehicle-steps/s)" if summary.get("vehicle_steps_per_s") else "")
-          + (" -- interrupted, partial results kept" if summary.get("interrupted") else ""))
+          + (" -- interrupted (Ctrl-C): the statistics are those of the finished runs" if summary.get("interrupted") else ""))
     nees = summary.get("nees")
     if nees:
         print(f"  NEES: average {nees['mean']:.2f} for {nees['dof']} states (95 % bounds "
@@ -373,6 +386,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                                   f"logs in {name}/timeseries.csv, timeseries.mcap (ROS 2 bag) and "
                                   f"timeseries.rovlab.mcap"})
     mc_name = "step-observer-model"
+    interrupted = False
     if args.runs > 1:
         print(f"[{len(cases) + 1}/{len(cases) + 1}] filter consistency: {args.runs} Monte Carlo runs of {mc_name}")
         data, file = load_scenario_data(mc_name)
@@ -380,8 +394,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         summary = _monte_carlo(data, file, result.scenario.seed, args.runs, args.workers, "processes", None,
                                out / mc_name, result, metrics, notes)
         _print_mc(summary)
+        interrupted = bool(summary.get("interrupted"))
         nees_png = out / mc_name / "monte_carlo" / "nees.png"
-        sections.append({"title": f"Monte Carlo: {mc_name} x {args.runs}",
+        ran = f"{summary['runs']}" + (f" of {args.runs} (interrupted)" if interrupted else "")
+        sections.append({"title": f"Monte Carlo: {mc_name} x {ran}",
                          "description": "Average NEES over independent runs against its chi-square bounds: a "
                                         "consistent filter keeps it inside (Bar-Shalom et al. 2001, sec. 5.4).",
                          "metrics": {"nees": summary.get("nees"), "rms_error": {
@@ -389,7 +405,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                              if k.startswith("rms_error.")}},
                          "figures": [nees_png] if nees_png.exists() else [],
                          "extra": f"seeds {summary['seeds'][0]}..{summary['seeds'][-1]}; {summary['wall_time_s']:.2f} s"})
-    if args.compare_runs > 0:
+    if args.compare_runs > 0 and not interrupted:  # Ctrl-C: the report of what ran, and stop
         sections += _demo_comparisons(out, args.compare_runs)
     report = write_report_html(out / "report.html", "rovlab demo: uDrone case studies", sections,
                                intro="Depth and heading LQG (Kalman filter + LQR) of uDrone, reproducing the "
@@ -398,4 +414,4 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print()
     _print_summary(rows)
     print(f"\nreport: {report}")
-    return 0
+    return 130 if interrupted else 0

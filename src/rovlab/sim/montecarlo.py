@@ -9,15 +9,22 @@ find it in the cache) or, with ``backend="dask"``, to a Dask cluster. The pool's
 forked on Linux (they inherit the design and the loaded loop) and spawned elsewhere (macOS,
 Windows; or ``start_method="spawn"``): a spawned worker designs once and loads
 the loop from the cache. Workers return only the metrics and the NEES/NIS series, not the logs.
+
+Ctrl-C is the parent's alone: the pool's workers ignore SIGINT (a terminal sends it to the whole
+process group), and the parent, on KeyboardInterrupt, ends the pool at once and returns the runs
+that had finished (fewer than the seeds given, which is how a caller tells).
 """
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
@@ -87,8 +94,16 @@ _worker: Campaign | None = None  # the campaign of a pool worker process (set by
 
 def _init_worker(campaign: Campaign | None, data: Mapping[str, Any], file: str, first_seed: int) -> None:
     """Pool worker start: a forked worker inherits the parent's campaign (designed, compiled loop
-    loaded); a spawned one builds its own, once (the loop then loads from numba's cache)."""
+    loaded); a spawned one builds its own, once (the loop then loads from numba's cache).
+
+    Ctrl-C is left to the parent (which stops the pool): a worker that took the terminal's SIGINT
+    would die with a traceback between two chunks and break the pool under the parent's feet. The
+    worker starts with SIGINT blocked (:func:`_sigint_blocked`), so one sent while it started is
+    dropped here rather than delivered."""
     global _worker
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     _worker = campaign if campaign is not None else Campaign(data, file, first_seed)
 
 
@@ -106,7 +121,11 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     work (e.g. writing the files of its single run), done in this process while the workers run
     (before the runs when there are no workers); an error in it stops the runs and is raised.
     ``start_method``: how the pool starts its workers (multiprocessing's "fork", "spawn" or
-    "forkserver"; default: "fork" on Linux, the platform's default elsewhere)."""
+    "forkserver"; default: "fork" on Linux, the platform's default elsewhere).
+
+    Ctrl-C (KeyboardInterrupt) once the runs have started ends them at once, ``meanwhile`` too if
+    it was under way, and returns the runs that had finished, in seed order: fewer than
+    ``seeds``. Before any run has finished (or in ``meanwhile`` without workers) it propagates."""
     seeds = list(seeds)
     workers = max(1, workers or os.cpu_count() or 1)
     if backend == "dask":
@@ -131,13 +150,13 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
         try:
             campaign.run_all(seeds, keep)
         except KeyboardInterrupt:  # keep what finished, as the parallel path does
-            print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
+            if not out:
+                raise
         return out
     # the first run here: it loads the compiled loop before the fork, so no worker pays for it
     results: dict[int, dict[str, Any]] = {}
     first = campaign.run(seeds[0])
     results[seeds[0]] = first
-    done = 1
     rest = seeds[1:]
     chunks = _guided_chunks(rest, workers)
     if start_method is None:  # fork on Linux only: macOS has it, but forking after LLVM and its frameworks
@@ -146,41 +165,68 @@ def run_many(data: Mapping[str, Any], file: str, seeds: Sequence[int], *, worker
     fork = ctx.get_start_method() == "fork"
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=_init_worker,
                                initargs=(campaign if fork else None, data, file, seeds[0]))
-    futures = [pool.submit(_worker_chunk, c) for c in chunks]
-    if meanwhile is not None:  # the workers are forked and busy: the caller's own work now
-        try:
-            meanwhile()
-        except BaseException:  # its error (or Ctrl-C) ends the command: stop the workers at once
-            _stop(pool, futures)
-            raise
+    futures: list[Any] = []
     try:
+        with _sigint_blocked():  # the workers are started by the submits: with SIGINT blocked (_init_worker)
+            futures = [pool.submit(_worker_chunk, c) for c in chunks]
+        if meanwhile is not None:  # the workers are busy: the caller's own work now
+            try:
+                meanwhile()
+            except KeyboardInterrupt:
+                raise
+            except BaseException:  # its error ends the command: stop the workers at once
+                _stop(pool)
+                raise
         if progress:
-            progress(done, n)
+            progress(len(results), n)
         for fut in as_completed(futures):
             for r in fut.result():
                 results[r["seed"]] = r
-                done += 1
             if progress:
-                progress(done, n)
+                progress(len(results), n)
     except KeyboardInterrupt:
-        # keep what finished: the caller writes the partial statistics
+        # keep what finished (chunks done but not yet read too); the caller writes their statistics
         for fut in futures:
-            fut.cancel()
-        pool.shutdown(wait=False, cancel_futures=True)
-        print(f"\ninterrupted: keeping {done} of {n} runs", file=sys.stderr)
+            if fut.done() and not fut.cancelled() and fut.exception() is None:
+                for r in fut.result():
+                    results[r["seed"]] = r
+        _stop(pool)
         return [results[s] for s in seeds if s in results]
     pool.shutdown()
     return [results[s] for s in seeds]
 
 
-def _stop(pool: ProcessPoolExecutor, futures: list) -> None:
-    """Cancel what has not started and end the worker processes (a chunk under way would
-    otherwise run to its end before the interpreter may exit)."""
-    for fut in futures:
-        fut.cancel()
-    for proc in list(getattr(pool, "_processes", {}).values()):  # no public way before Python 3.14
-        proc.terminate()
+@contextlib.contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """SIGINT held back in this thread (POSIX; elsewhere nothing): the processes it starts begin
+    with it blocked, and a Ctrl-C in the meantime arrives when the block ends."""
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _stop(pool: ProcessPoolExecutor, *, timeout_s: float = 10.0) -> None:
+    """End the pool now: what has not started is dropped and the workers are ended (a chunk under
+    way would otherwise run to its end before the interpreter may exit).
+
+    The pool cancels its own pending futures (shutdown with cancel_futures): a future cancelled
+    from outside while the pool still holds it makes the pool's thread fail on the ended workers
+    (concurrent.futures sets BrokenProcessPool on every future it holds; on a cancelled one that is
+    InvalidStateError: CANCELLED, printed as a traceback)."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # no public way before Python 3.14
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
+        proc.terminate()
+    for proc in processes:
+        proc.join(timeout_s)
+    if manager is not None:
+        manager.join(timeout_s)
 
 
 def _guided_chunks(seeds: Sequence[int], workers: int, *, largest: int = 96, smallest: int = 1) -> list[list[int]]:
@@ -226,21 +272,26 @@ def _run_dask(data, file, seeds, scheduler, progress, meanwhile=None):
         size = max(1, min(48, n // (workers * 4) or 1))
         chunks = [seeds[i:i + size] for i in range(0, n, size)]
         futures = [client.submit(_chunk, data, file, c, pure=False) for c in chunks]
-        if meanwhile is not None:
-            try:
-                meanwhile()
-            except BaseException:
-                client.cancel(futures)
-                raise
         try:
+            if meanwhile is not None:
+                try:
+                    meanwhile()
+                except KeyboardInterrupt:
+                    raise
+                except BaseException:
+                    client.cancel(futures)
+                    raise
             for fut in as_completed(futures):
                 for r in fut.result():
                     out[r["seed"]] = r
                 if progress:
                     progress(len(out), n)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt:  # keep what finished, as the process pool does
+            for fut in futures:
+                if fut.status == "finished":
+                    for r in fut.result():
+                        out[r["seed"]] = r
             client.cancel(futures)
-            print(f"\ninterrupted: keeping {len(out)} of {n} runs", file=sys.stderr)
         return [out[s] for s in seeds if s in out]
     finally:
         client.close()

@@ -104,8 +104,10 @@ def write_monte_carlo(out_dir: str | Path, scenario_name: str, summary: Mapping[
         nees = np.array([r["nees"] for r in runs], dtype=float)
         if "nees" in summary:
             dof = summary["nees"]["dof"]
+            asked = int(summary.get("runs_requested", len(runs)))
+            count = f"{len(runs)} runs" if asked == len(runs) else f"the {len(runs)} finished of {asked} runs (interrupted)"
             figs.append(write_nees_figure(out / "nees.png", t, nees, summary["nees"]["bounds_per_step"], dof,
-                                          f"{scenario_name}: filter consistency over {len(runs)} runs"))
+                                          f"{scenario_name}: filter consistency over {count}"))
     except RuntimeError as exc:
         notes.append(str(exc))
     written.update({f.name: f for f in figs})
