@@ -62,7 +62,13 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from rovlab._jit import WITHOUT_NRT, njit
-from rovlab.control.lqg import lqg_tau, lqr_lines, lqr_summary
+from rovlab.control.lqg import (  # the reference model is shared with the LQG's optional one
+    lqg_tau,
+    lqr_lines,
+    lqr_summary,
+    reference_accel,
+    reference_model,
+)
 from rovlab.control.lqr import LQRDesign, design_lqr_from_config
 from rovlab.core.components import (
     NAV_BN,
@@ -146,12 +152,6 @@ def adapt(theta, Y, s, gamma, sigma, theta0, lo, hi, h):
         theta[i] = v
 
 
-@njit(cache=True, inline="always")
-def reference_accel(zm, wm, r, om2, c1):
-    """z_m_ddot = omega^2 (r - z_m) - 2 zeta omega w_m (c1 = 2 zeta omega)."""
-    return om2 * (r - zm) - c1 * wm
-
-
 # --------------------------------------------------------------------------------------------
 # The component
 # --------------------------------------------------------------------------------------------
@@ -229,13 +229,6 @@ register_controller(MRAC, state=("state", "started"), step=_mrac_step, actuated=
 # --------------------------------------------------------------------------------------------
 # Design
 # --------------------------------------------------------------------------------------------
-
-def reference_model(omega: float, zeta: float) -> tuple[np.ndarray, np.ndarray]:
-    """(A_m, B_m) of the reference model, state [z_m, w_m], inputs [r, nu_h]."""
-    A = np.array([[0.0, 1.0], [-omega**2, -2.0 * zeta * omega]])
-    B = np.array([[0.0, 0.0], [omega**2, -1.0]])
-    return A, B
-
 
 @dataclass(frozen=True, eq=False)
 class MRACDesign:
@@ -334,6 +327,29 @@ def design_mrac(vehicle: Vehicle, config: DesignConfig) -> MRACDesign:
     lqr = design_lqr_from_config(vehicle, config)
     return MRACDesign(lqr, c, h, theta0, lo, hi, gamma, np.ascontiguousarray(Phi_m), np.ascontiguousarray(G_m),
                       radius, need, where)
+
+
+def equivalent_gains(design: MRACDesign) -> dict[str, Any]:
+    """The heave law as a PID on e = z - z_m, linearised at rest (reference model still, w = 0,
+    theta_hat = theta_0): what a fixed-gain controller must match to be as stiff (rovlab compare).
+
+    With a_r = -lambda w and F_hat = Gamma_F * integral of s (the F row of the adaptation,
+    Y_F = -1), Z = -(lambda k_s + Gamma_F) e - (k_s + lambda M_0 - D_l0) w - lambda Gamma_F * integral of e:
+
+    * ``K_z`` = lambda k_s, ``K_w`` = k_s + lambda M_0 - D_l0: the state feedback without the
+      adaptation (an LQR's K on [z, w]); the closed loop's damping is K_w + D_l = k_s + lambda M;
+    * ``K_p`` = K_z + Gamma_F, ``K_i`` = lambda Gamma_F: with the adapted net force, which acts as
+      a PI on s. On the true model (theta_hat = theta) the closed loop is
+      (s + lambda)(M s^2 + k_s s + Gamma_F): the poles of ``poles``.
+    """
+    c = design.config
+    M0, Dl0 = float(design.theta0[0]), float(design.theta0[1])
+    gF = float(design.gamma[3])
+    Kz = c.lam * c.k_s
+    Kw = c.k_s + c.lam * M0 - Dl0
+    roots = np.roots([M0, c.k_s, gF]) if gF > 0 else np.array([-c.k_s / M0, 0.0])
+    return {"K_z": Kz, "K_w": Kw, "K_p": Kz + gF, "K_d": Kw, "K_i": c.lam * gF, "M_0": M0, "D_l0": Dl0,
+            "Gamma_F": gF, "poles": sorted([complex(-c.lam), *(complex(r) for r in roots)], key=lambda z: -z.real)}
 
 
 def heave_force_needed(theta: np.ndarray, omega: float, zeta: float, step: float) -> tuple[float, float]:

@@ -22,19 +22,47 @@ true initial depth, at rest), the same yardstick for every controller, adaptive 
     adaptive controllers: every adapted parameter stayed within its projection bounds.
 ``diverged``
     a non-finite value or |z - z_m| above 1 m.
+
+**Controllers at equal stiffness** (issue 28, item 3). Besides the components (``lqg``,
+``mrac``, ...) a comparison may name *variants*: a component run with a configuration derived
+from the scenario's (:data:`VARIANTS`).
+
+``lqg-matched``
+    the LQG as stiff as MRAC. MRAC's heave law, linearised at rest, is a PID on e = z - z_m
+    (rovlab.control.mrac.equivalent_gains): state feedback K_z = lambda k_s, K_w = k_s + lambda M_0 -
+    D_l0 (160 N/m and 111.7 N s/m for the thesis configuration's [mrac] table), plus the adapted
+    net force, an integral of s (K_p = K_z + Gamma_F = 460 N/m, K_i = lambda Gamma_F = 600 N/(m s)).
+    The variant keeps the LQG law and (i) solves the LQR's heave weights Q_z, Q_w (R and the heading
+    weights unchanged) so that the discrete LQR's K on [z, w] equals [K_z, K_w]
+    (:func:`match_lqr`); (ii) solves the filter's heave-bias spectral density psd.b_w so that the
+    bias estimate gives the loop the same integral action as MRAC's adapted F: the effective integral
+    gain, a force step divided by the integral of the depth error it leaves (for a PID exactly K_i),
+    computed for both on the linear design model sampled at h with their filters
+    (:func:`force_step_response`, :func:`match_bias_psd`); (iii) gives the LQG MRAC's reference
+    model with its feed-forward ([lqg] reference_model, rovlab.control.lqg), so that both follow
+    the same z_m. What remains between ``lqg-matched`` and ``mrac`` is the adaptation.
+``mrac-f-only``
+    MRAC adapting only the net force F (the gains of M, D_l and D_q set to 0: the model's values
+    throughout): what adapting the mass and the damping adds.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from rovlab.control.mrac import PARAMETERS, reference_model
+from rovlab.control.lqg import LQGConfig
+from rovlab.control.lqr import design_lqr_from_config
+from rovlab.control.mrac import PARAMETERS, adapt, design_mrac, equivalent_gains, heave_law, reference_model
+from rovlab.core.components import component_names
 from rovlab.models.discretise import zoh
+from rovlab.params.design import DesignConfig
+from rovlab.params.validate import ConfigError, Problem
+from rovlab.params.vehicle import Vehicle
 from rovlab.sim.designs import DesignBook
 from rovlab.sim.prepare import prepare
 from rovlab.sim.results import SimResult
@@ -45,6 +73,236 @@ BAND_M = 0.01
 LAST_S = 10.0
 DIVERGED_M = 1.0
 METRICS = ("depth_error_rms", "depth_error_peak", "settling_time_s", "last10s_rms", "effort_rms", "saturation_s")
+
+
+# --------------------------------------------------------------------------------------------
+# Controllers at equal stiffness: the variants
+# --------------------------------------------------------------------------------------------
+
+MATCH_RTOL = 1e-3  # relative tolerance of the matched gains (K_z, K_w and the integral gain)
+_HEAVE = ("z", "w", "b_w")  # the heave states of the depth-and-heading filter
+
+
+def _heave_filter(vehicle: Vehicle, config: DesignConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(Phi, Delta_Z, steady-state Kalman gain, H) of the filter's heave states [z, w, b_w] (the
+    depth-and-heading KF of the configuration, every channel that measures one of them)."""
+    from scipy.linalg import solve_discrete_are
+
+    from rovlab.estimation.model import build_filter_model
+
+    fm = build_filter_model(vehicle, config)
+    idx = [fm.states.index(q) for q in _HEAVE]
+    rows = [j for j in range(fm.H.shape[0]) if np.any(fm.H[j, idx] != 0.0)]
+    Phi = fm.Phi[np.ix_(idx, idx)]
+    H = fm.H[np.ix_(rows, idx)]
+    R = fm.R[np.ix_(rows, rows)]
+    P = solve_discrete_are(Phi.T, H.T, fm.Q[np.ix_(idx, idx)], R)  # the prior's steady state
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    return Phi, fm.Delta[idx, fm.inputs.index("Z")], K, H
+
+
+def force_step_response(vehicle: Vehicle, config: DesignConfig, controller: str, *, step: float = 1.0,
+                        duration_s: float = 120.0, filtered: bool = True) -> dict[str, Any]:
+    """A heave force step on the linear design model (m - Z_wdot, Z_w of the configuration),
+    sampled at its h as the loop does it (filter correction, law, plant and prediction over one
+    sample), from rest at the set-point, with the configuration's filter (steady-state gain) and
+    ``controller`` ("lqg": its K and b_w; "mrac": its law and adaptation, reference model at rest;
+    ``filtered=False``: MRAC's law on the true z and w instead of the filter's).
+
+    Returns the depth error z and the force estimate the law used (b_w or F_hat) per sample, and
+    ``integral_gain``: step / (sum of z h), the effective integral gain [N/(m s)] (for a PID
+    exactly its K_i), ``peak_m`` and ``estimate_iae_s`` (integral of |1 - estimate / step|)."""
+    h = float(config.sample_time)
+    mv = config.model_values(vehicle)
+    M, D = mv["m"] - mv["Z_wdot"], -mv["Z_w"]
+    Php, Gp = zoh(np.array([[0.0, 1.0], [0.0, -D / M]]), np.array([[0.0], [1.0 / M]]), h)
+    Phi, Dz, Kf, H = _heave_filter(vehicle, config)
+    n = int(math.ceil(duration_s / h))
+    if controller == "mrac":
+        d = design_mrac(vehicle, config)
+        c = d.config
+        st = np.concatenate([d.theta0, [0.0, 0.0]])
+        Y = np.zeros(4)
+        F0 = float(d.theta0[3])
+
+        def law(xh: np.ndarray) -> tuple[float, float]:
+            Z, s_ = heave_law(st, xh[0], xh[1], 0.0, 0.0, 0.0, c.lam, c.k_s, Y)
+            used = float(st[3]) - F0
+            adapt(st, Y, s_, d.gamma, c.sigma, d.theta0, d.lo, d.hi, h)
+            return Z + F0, used  # deviations from the balance at rest (Z = -F0)
+        x = np.zeros(2)
+        xh = np.zeros(3)
+        z = np.empty(n)
+        est = np.empty(n)
+        for k in range(n):
+            xh = xh + Kf @ (H[:, :2] @ x - H @ xh)
+            Z, est[k] = law(xh if filtered else x)
+            z[k] = x[0]
+            x = Php @ x + Gp[:, 0] * (Z + step)
+            xh = Phi @ xh + Dz * Z
+    elif controller == "lqg" and filtered:
+        # the same sample as above, linear: X = [z, w, z_hat, w_hat, b_hat] (prior), X+ = A X + b step
+        K = design_lqr_from_config(vehicle, config).K
+        corr = np.block([[np.eye(2), np.zeros((2, 3))], [Kf @ H[:, :2], np.eye(3) - Kf @ H]])  # after the correction
+        L = np.array([0.0, 0.0, K[0, 0], K[0, 2], 1.0])  # Z = -L X+
+        A = np.zeros((5, 5))
+        A[:2] = np.hstack([Php, np.zeros((2, 3))]) - np.outer(Gp[:, 0], L)
+        A[2:] = np.hstack([np.zeros((3, 2)), Phi]) - np.outer(Dz, L)
+        A = A @ corr
+        b = np.concatenate([Gp[:, 0], np.zeros(3)]) * step
+        X = np.zeros((n, 5))
+        for k in range(1, n):
+            X[k] = A @ X[k - 1] + b
+        z = X[:, 0]
+        est = (X @ corr.T)[:, 4]
+    else:
+        raise ValueError(f"controller must be 'lqg' (filtered) or 'mrac', got {controller!r}")
+    # the integral of the depth error above where it settles: a filter whose bias is a Gauss-Markov
+    # state (not a random walk) leaves an offset of ~1e-7 m/N that would otherwise grow the integral
+    area = float(np.sum(z - z[-1]) * h)
+    peak = float(np.max(np.abs(z)))
+    return {"z": z, "estimate": est, "h": h, "integral_gain": step / area if area > 0 else math.inf,
+            "peak_m": peak / abs(step), "estimate_iae_s": float(np.sum(np.abs(1.0 - est / step)) * h),
+            "offset_m": float(z[-1]) / abs(step),
+            "settled": bool(np.max(np.abs(np.diff(z[-20:]))) < 1e-6 * max(peak, 1e-300)
+                            and abs(est[-1] / step - 1.0) < 1e-3)}
+
+
+def match_lqr(vehicle: Vehicle, config: DesignConfig, K_z: float, K_w: float) -> DesignConfig:
+    """The configuration with the LQR's heave weights Q_z, Q_w solved so that the discrete LQR's
+    gains on z and w are K_z and K_w (within MATCH_RTOL); R and the heading weights unchanged.
+    ConfigError when no positive weights give them (a K_w too small for K_z: the LQR's return
+    difference condition)."""
+    from scipy.optimize import least_squares
+
+    target = np.array([K_z, K_w])
+
+    def with_q(logq: np.ndarray) -> DesignConfig:
+        Q = np.array(config.lqr_Q, dtype=float)
+        Q[0], Q[2] = np.exp(logq)
+        return replace(config, lqr_Q=Q, lqr_bryson=None)
+
+    def residual(logq: np.ndarray) -> np.ndarray:
+        K = design_lqr_from_config(vehicle, with_q(logq)).K
+        return (K[0, [0, 2]] - target) / target
+
+    mv = config.model_values(vehicle)
+    M, D = mv["m"] - mv["Z_wdot"], -mv["Z_w"]
+    r = float(config.lqr_R[0])
+    # start: the continuous LQR of the heave model, K_z = sqrt(q_z / r), q_w = r (K_w^2 + 2 D K_w - 2 M K_z)
+    q0 = np.array([r * K_z**2, max(r * (K_w**2 + 2.0 * D * K_w - 2.0 * M * K_z), 1e-3 * r * K_w**2)])
+    try:
+        sol = least_squares(residual, np.log(q0), xtol=1e-14, ftol=1e-14, gtol=1e-14)
+        ok = bool(np.max(np.abs(sol.fun)) < MATCH_RTOL)
+    except ConfigError:
+        ok = False
+    if not ok:
+        raise ConfigError([Problem(config.file or config.name, "mrac", {"K_z": K_z, "K_w": K_w},
+                                   "MRAC gains an LQR can have: positive weights on z and w give K_w = "
+                                   f"{K_w:.4g} N s/m with K_z = {K_z:.4g} N/m only when K_w^2 + 2 D K_w > 2 M K_z "
+                                   f"(M = {M:.4g} kg, D = {D:.4g} N s/m); raise mrac.k_s or lower mrac.lambda")],
+                          "filter configuration")
+    return with_q(sol.x)
+
+
+def match_bias_psd(vehicle: Vehicle, config: DesignConfig, integral_gain: float) -> DesignConfig:
+    """The configuration with the filter's heave-bias spectral density psd.b_w solved so that the
+    LQG's effective integral gain (force_step_response) is ``integral_gain`` (within MATCH_RTOL)."""
+    from scipy.optimize import brentq
+
+    def with_psd(log_psd: float) -> DesignConfig:
+        psd = np.array(config.psd, dtype=float)
+        psd[4] = math.exp(log_psd)
+        return replace(config, psd=psd)
+
+    def gap(log_psd: float) -> float:
+        return math.log(force_step_response(vehicle, with_psd(log_psd), "lqg")["integral_gain"] / integral_gain)
+
+    lo, hi = math.log(1e-6), math.log(1e6)
+    if not gap(lo) < 0.0 < gap(hi):
+        raise ConfigError([Problem(config.file or config.name, "process_noise.psd.b_w", float(config.psd[4]),
+                                   f"a heave-bias density for which the LQG's integral gain can be {integral_gain:.4g} "
+                                   "N/(m s) (none between 1e-6 and 1e6)")], "filter configuration")
+    return with_psd(brentq(gap, lo, hi, xtol=1e-6, rtol=1e-9))
+
+
+def matched_lqg(vehicle: Vehicle, config: DesignConfig) -> tuple[DesignConfig, dict[str, Any]]:
+    """The ``lqg-matched`` variant's configuration (module docstring) and what it matched."""
+    mrac_design = design_mrac(vehicle, config)
+    g = equivalent_gains(mrac_design)
+    ref = config.table("mrac")
+    out = match_lqr(vehicle, config, g["K_z"], g["K_w"])
+    mrac_step = force_step_response(vehicle, config, "mrac")
+    out = match_bias_psd(vehicle, out, mrac_step["integral_gain"])
+    out = replace(out, name=f"{config.name}, LQG matched to MRAC", controller="lqg",
+                  tables={**out.tables, "lqg": LQGConfig(reference_model=True, bandwidth=ref.bandwidth,
+                                                         damping=ref.damping, given=True,
+                                                         source="rovlab compare: MRAC's reference model")})
+    lqr = design_lqr_from_config(vehicle, out)
+    lqg_step = force_step_response(vehicle, out, "lqg")
+    thesis_step = force_step_response(vehicle, config, "lqg", duration_s=2000.0)
+    thesis_K = design_lqr_from_config(vehicle, config).K
+    q = np.asarray(out.lqr_Q)
+    info = {
+        "mrac": {"K_z": g["K_z"], "K_w": g["K_w"], "K_p": g["K_p"], "K_i": g["K_i"], "M_0": g["M_0"],
+                 "D_l0": g["D_l0"], "Gamma_F": g["Gamma_F"],
+                 "closed_loop_poles": [[p.real, p.imag] for p in g["poles"]],
+                 "integral_gain_sampled": mrac_step["integral_gain"], "peak_m_per_N": mrac_step["peak_m"],
+                 "estimate_iae_s": mrac_step["estimate_iae_s"]},
+        "lqg-matched": {"K_z": float(lqr.K[0, 0]), "K_w": float(lqr.K[0, 2]), "Q_z": float(q[0]), "Q_w": float(q[2]),
+                        "R_Z": float(np.asarray(out.lqr_R)[0]), "z_max_m": float(1.0 / math.sqrt(q[0])),
+                        "w_max_m_s": float(1.0 / math.sqrt(q[2])), "psd_b_w": float(out.psd[4]),
+                        "integral_gain_sampled": lqg_step["integral_gain"], "peak_m_per_N": lqg_step["peak_m"],
+                        "estimate_iae_s": lqg_step["estimate_iae_s"],
+                        "reference_model": {"bandwidth_rad_s": ref.bandwidth, "damping": ref.damping}},
+        "lqg": {"K_z": float(thesis_K[0, 0]), "K_w": float(thesis_K[0, 2]), "psd_b_w": float(config.psd[4]),
+                "integral_gain_sampled": thesis_step["integral_gain"], "peak_m_per_N": thesis_step["peak_m"],
+                "estimate_iae_s": thesis_step["estimate_iae_s"]},
+        "tolerance": MATCH_RTOL,
+        "definitions": {
+            "K_z, K_w": "heave state feedback on z [N/m] and w [N s/m] (MRAC: lambda k_s, k_s + lambda M_0 - D_l0)",
+            "K_p, K_i": "MRAC with its adapted net force as a PID: K_z + Gamma_F [N/m], lambda Gamma_F [N/(m s)]",
+            "integral_gain_sampled": "a 1 N heave force step on the linear design model, sampled at h with the "
+                                     "controller's filter: 1 N / integral of the depth error [N/(m s)]",
+            "peak_m_per_N": "largest depth error after that step [m per N]",
+            "estimate_iae_s": "integral of |1 - force estimate / step| after it [s]",
+        },
+    }
+    return out, info
+
+
+def mrac_force_only(vehicle: Vehicle, config: DesignConfig) -> tuple[DesignConfig, dict[str, Any]]:
+    """The ``mrac-f-only`` variant: MRAC with the adaptation gains of M, D_l and D_q set to 0."""
+    mc = config.table("mrac")
+    gain = {**mc.gain, "M": 0.0, "D_l": 0.0, "D_q": 0.0}
+    return (replace(config.with_table("mrac", replace(mc, gain=gain)), controller="mrac",
+                    name=f"{config.name}, MRAC adapting F only"), {"gain": gain})
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A controller of a comparison that is a component with a derived configuration."""
+
+    component: str
+    derive: Callable[[Vehicle, DesignConfig], tuple[DesignConfig, dict[str, Any]]]
+    description: str
+
+
+VARIANTS: dict[str, Variant] = {
+    "lqg-matched": Variant("lqg", matched_lqg, "the LQG as stiff as MRAC: LQR heave gains = MRAC's state feedback, "
+                                               "bias density giving MRAC's integral gain, MRAC's reference model"),
+    "mrac-f-only": Variant("mrac", mrac_force_only, "MRAC adapting only the net force F (M, D_l, D_q at the model)"),
+}
+
+
+def controller_names() -> tuple[str, ...]:
+    """Every name a comparison takes: the controller components, then the variants."""
+    return (*component_names("controller"), *VARIANTS)
+
+
+def component_of(name: str) -> str:
+    """The controller component a comparison's controller name runs (itself unless a variant)."""
+    return VARIANTS[name].component if name in VARIANTS else name
 
 
 def reference_model_response(sc: Scenario, times: np.ndarray, omega: float, zeta: float) -> np.ndarray:
@@ -135,12 +393,20 @@ def compare(data: Mapping[str, Any], file: str, controllers: Sequence[str], seed
     first: Scenario | None = None
     refmodel: tuple[float, float] | None = None
     bounds_of: dict[str, Any] = {}
+    derived: dict[str, tuple[DesignConfig, dict[str, Any]]] = {}
     done = 0
     for i, seed in enumerate(seeds):
         sc = scenario_from_dict(data, file=file, seed=seed)
         first = first or sc
         for ctl in controllers:
-            prep = prepare(replace(sc, controller=ctl), book=book)
+            comp = component_of(ctl)
+            config = None
+            if ctl in VARIANTS:
+                if ctl not in derived:  # once per comparison: the scenario's vehicle and configuration
+                    base = prepare(replace(sc, controller=comp), book=book)
+                    derived[ctl] = VARIANTS[ctl].derive(base.vehicle, base.config)
+                config = derived[ctl][0]
+            prep = prepare(replace(sc, controller=comp), config=config, book=book)
             if refmodel is None:
                 mc = prep.config.table("mrac")
                 refmodel = (mc.bandwidth, mc.damping)
@@ -177,6 +443,8 @@ def compare(data: Mapping[str, Any], file: str, controllers: Sequence[str], seed
             "parameter_bounds_held": "every adapted parameter stayed within its projection bounds in every run",
             "values": "with several runs: the mean over runs; 'spread' gives p95 and max",
         },
+        "variants": {name: {"component": VARIANTS[name].component, "description": VARIANTS[name].description,
+                            **derived[name][1]} for name in controllers if name in derived},
     }
     for ctl in controllers:
         runs = per[ctl]
@@ -220,7 +488,7 @@ def table(comparison: Mapping[str, Any]) -> str:
     cols = [("RMS err [cm]", "depth_error_rms", 100.0), ("peak [cm]", "depth_error_peak", 100.0),
             ("settle [s]", "settling_time_s", 1.0), ("last 10 s [cm]", "last10s_rms", 100.0),
             ("effort [N]", "effort_rms", 1.0), ("saturated [s]", "saturation_s", 1.0)]
-    header = f"{'controller':10s} " + " ".join(f"{c[0]:>16s}" for c in cols) + f" {'bounds':>7s} {'diverged':>8s}"
+    header = f"{'controller':12s} " + " ".join(f"{c[0]:>16s}" for c in cols) + f" {'bounds':>7s} {'diverged':>8s}"
     lines = [head, header]
     for ctl in ctls:
         e = comparison[ctl]
@@ -235,10 +503,21 @@ def table(comparison: Mapping[str, Any]) -> str:
                 text += f" [{e['spread'][key]['never_settled']} never]"
             cells.append(f"{text:>16s}")
         held = e.get("parameter_bounds_held")
-        lines.append(f"{ctl:10s} " + " ".join(cells) + f" {('-' if held is None else 'held' if held else 'LEFT'):>7s} "
+        lines.append(f"{ctl:12s} " + " ".join(cells) + f" {('-' if held is None else 'held' if held else 'LEFT'):>7s} "
                      f"{e['diverged']:>8d}")
     lines.append("('-': not applicable or never settled to 1 cm; bounds: adapted parameters within their "
                  "projection set)")
+    variants = comparison.get("variants", {})
+    m = variants.get("lqg-matched")
+    if m:
+        a, b, t = m["mrac"], m["lqg-matched"], m["lqg"]
+        lines.append(f"lqg-matched: LQR K_z {b['K_z']:.4g} N/m, K_w {b['K_w']:.4g} N s/m = MRAC's lambda k_s, "
+                     f"k_s + lambda M_0 - D_l0 (lqg: {t['K_z']:.3g}, {t['K_w']:.3g}); bias density b_w "
+                     f"{b['psd_b_w']:.3g} (lqg: {t['psd_b_w']:.3g}) for MRAC's integral gain "
+                     f"{a['integral_gain_sampled']:.4g} N/(m s) (lqg: {t['integral_gain_sampled']:.3g}); MRAC's "
+                     "reference model in front")
+    if "mrac-f-only" in variants:
+        lines.append("mrac-f-only: MRAC adapting only the net force F (M, D_l, D_q held at the model)")
     return "\n".join(lines)
 
 
@@ -251,7 +530,7 @@ def figure(path: Any, comparison: Mapping[str, Any], kept: Mapping[str, list[Sim
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(4, 1, figsize=(9, 10), sharex=True)
-    colours = {"lqg": "tab:blue", "mrac": "tab:red"}
+    colours = {"lqg": "tab:blue", "lqg-matched": "tab:green", "mrac": "tab:red", "mrac-f-only": "tab:orange"}
     drawn_ref = False
     for ctl, results in kept.items():
         if not results:
