@@ -360,7 +360,7 @@ def _read_thruster(t: TableReader) -> Thruster:
     neutral = t.number("pwm_neutral_us", 1500.0, lo=500.0, hi=2500.0)
     dead = t.number("deadband_us", 25.0, nonnegative=True)
     if all(np.isfinite([pwm_min, pwm_max, neutral, dead])):
-        if not pwm_min + 0 < neutral - dead < neutral + dead < pwm_max:
+        if not (pwm_min < neutral - dead and neutral + dead < pwm_max):  # dead = 0: no dead band
             t.problem("pwm_min_us", [pwm_min, neutral, dead, pwm_max],
                       "pwm_min_us < pwm_neutral_us - deadband_us and pwm_neutral_us + deadband_us < pwm_max_us")
     source = t.string("source", "")
