@@ -17,6 +17,8 @@ import numpy as np
 from rovlab._jit import WITHOUT_NRT, njit, plain
 from rovlab.core.components import ComponentInfo, EstimatorSpec, register_component, register_estimator
 from rovlab.core.summary import render
+from rovlab.core.units import squared
+from rovlab.core.units import unit as quantity_unit
 from rovlab.estimation.fusion import new_channel_state
 from rovlab.estimation.kalman import correct_arrays, pack_model, predict_arrays, unpack_model, work_size
 from rovlab.estimation.model import FilterModel, build_filter_model
@@ -126,10 +128,10 @@ def describe(spec: EstimatorSpec) -> list[str]:
            f"yaw M_r/-N_r = {_ratio(p.M_r, -p.N_r)}",
            f"  bias model (Gauss-Markov): time constants T_w = {fm.T_w:.6g} s (b_w), T_r = {fm.T_r:.6g} s (b_r)",
            "  process noise W = diag(" + ", ".join(f"{n} {v:.6g}" for n, v in zip(fm.states, np.diag(fm.W))) + ")",
-           "  measurements (variance in the channel's units squared: m^2 for z, rad^2 for psi):"]
+           "  measurements (variance in the unit of the measured quantity squared):"]
     for c in fm.channels:
         gate = "off" if not np.isfinite(c.gate_threshold) else f"chi2 {c.gate_threshold:.3g}"
-        unit = "rad^2" if c.angle else "m^2"
+        unit = squared(quantity_unit(c.quantity)) or "(SI unit)^2"  # z m^2, psi rad^2, w m^2/s^2, r rad^2/s^2
         out.append(f"    {c.name:16s} column {c.column:14s} variance {c.variance:.6g} {unit}  l_z {c.offset:+.4g} m  "
                    f"timeout {c.timeout_s:g} s  gate {gate}")
     if fm.observable:

@@ -191,6 +191,8 @@ def plot_step(fit, path: str | Path, *, title: str = "", position_unit: str = "m
 
 def plot_noise(estimate, path: str | Path, *, title: str = "", units: dict[str, str] | None = None) -> Path:
     """Per channel: detrended residual with ±1 sigma, and the Allan deviation (or a histogram)."""
+    from rovlab.core.units import squared
+
     names = list(estimate.channels)
     fig, ax = _figure(len(names), 2, height=1.9, width=10.0)
     units = units or {}
@@ -198,11 +200,13 @@ def plot_noise(estimate, path: str | Path, *, title: str = "", units: dict[str, 
         c = estimate.channels[name]
         u = units.get(name, _guess_unit(name))
         a = ax[i, 0]
-        a.plot(estimate.time_s, c.residual, lw=0.4, color="C0")
-        for s in (-c.std, c.std):
-            a.axhline(s, color="C3", lw=0.8)
+        a.plot(estimate.time_s, c.residual, lw=0.4, color="C0", label="residual (drift removed)")
+        for k, s in enumerate((-c.std, c.std)):
+            a.axhline(s, color="C3", lw=0.8, label="±1σ (sample std)" if k == 0 else None)
+        a.legend(loc="lower right", fontsize=7)
         a.set_ylabel(f"{name}\n[{u}]", fontsize=8)
-        a.text(0.01, 0.95, f"σ² = {c.variance:.4g} {u}²  (95 % CI {c.ci95[0]:.3g}..{c.ci95[1]:.3g}); "
+        u2 = squared(u) if u != "unit" else "unit²"  # rad/s: rad^2/s^2
+        a.text(0.01, 0.95, f"σ² = {c.variance:.4g} {u2}  (95 % CI {c.ci95[0]:.3g}..{c.ci95[1]:.3g}); "
                f"drift removed {c.drift_per_s:.3g} {u}/s", transform=a.transAxes, va="top", fontsize=7,
                bbox=dict(facecolor="white", alpha=0.8, edgecolor="0.8"))
         if i == len(names) - 1:
@@ -231,9 +235,10 @@ def plot_noise(estimate, path: str | Path, *, title: str = "", units: dict[str, 
 
 
 def _guess_unit(name: str) -> str:
+    from rovlab.core.units import unit
+
     ch = name.split(".", 1)[1] if "." in name else name.split("_", 1)[0]
-    return {"x": "m", "y": "m", "z": "m", "phi": "rad", "theta": "rad", "psi": "rad", "u": "m/s", "v": "m/s",
-            "w": "m/s", "r": "rad/s"}.get(ch, "unit")
+    return unit(ch, "unit")
 
 
 def plot_added_mass(estimate, path: str | Path, *, title: str = "") -> Path:

@@ -615,6 +615,7 @@ def _cmd_step(args: argparse.Namespace) -> int:
 
 
 def _cmd_noise(args: argparse.Namespace) -> int:
+    from rovlab.core.units import squared
     from rovlab.ident import noise, plots
 
     table, cols = noise.read_noise(args.file)
@@ -631,16 +632,33 @@ def _cmd_noise(args: argparse.Namespace) -> int:
         sensors = sorted({k.split("]")[0] + "]" for k in edits})
         updated = _update(args, edits, sensors, f"variance: rovlab identify noise {Path(args.file).name} "
                                                 f"({est.time_s.size} samples, drift degree {args.detrend})")
-    data = est.as_dict() | {"file": args.file, "plot": png, "updated": updated}
+    units = {k: _column_unit(k) for k in est.channels}
+    data = est.as_dict() | {"file": args.file, "plot": png, "updated": updated,
+                            "units": {k: u or None for k, u in units.items()}}
     lines = [f"measurement variances (R diagonal) from {args.file}: {est.time_s.size} samples at {est.rate_hz:.4g} Hz, "
              f"drift of degree {args.detrend} removed",
-             f"  {'column':18s} {'variance':>12s} {'std':>11s}   95 % interval"]
+             f"  {'column':18s} {'variance':>12s} {'':9s} {'std':>11s} {'':5s}  95 % interval of the variance"]
     for k, c in est.channels.items():
-        lines.append(f"  {k:18s} {c.variance:12.5g} {c.std:11.4g}   {c.ci95[0]:.4g} .. {c.ci95[1]:.4g}")
+        u = units[k] or "(column's unit)"
+        u2 = squared(units[k]) or "(column's unit)^2"
+        lines.append(f"  {k:18s} {c.variance:12.5g} {u2:9s} {c.std:11.4g} {u:5s}  "
+                     f"{c.ci95[0]:.4g} .. {c.ci95[1]:.4g} {u2}")
+    if not all(units.values()):
+        lines.append("  (a column named <quantity>_<sensor> or <sensor>.<quantity>, e.g. z_pressure, gets its SI unit)")
     if png:
         lines.append(f"  figure: {png}")
     _emit(args, data, "\n".join(lines))
     return 0
+
+
+def _column_unit(column: str) -> str:
+    """The SI unit of a resting log's column named ``<quantity>_<sensor>`` or ``<sensor>.<quantity>``
+    ('' for another name)."""
+    from rovlab.core.units import unit
+    from rovlab.ident.noise import parse_channel_column
+
+    parsed = parse_channel_column(column)
+    return unit(parsed[1]) if parsed else ""
 
 
 def _cmd_added_mass(args: argparse.Namespace) -> int:
@@ -911,7 +929,8 @@ def _cmd_dive(args: argparse.Namespace) -> int:
 def _dive_text(fit, vehicle: str) -> str:
     a, b = fit.ident_span
     lines = [f"heave and yaw from {fit.file} (vehicle {vehicle}): identification {a:.1f}-{b:.1f} s, validation "
-             f"{fit.valid_span[0]:.1f}-{fit.valid_span[1]:.1f} s; output error, Newey-West standard deviations"]
+             f"{fit.valid_span[0]:.1f}-{fit.valid_span[1]:.1f} s; output error; standard deviations robust to "
+             "correlated errors (Newey-West, per window)"]
     lines += [f"  {n}" for n in fit.notes]
     for dof, f in fit.fits.items():
         if f.refused_dof:

@@ -145,6 +145,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
         "I_zz": v.I_zz,
         "weight": v.weight,
         "buoyancy": v.buoyancy,
+        "net_buoyancy": v.buoyancy - v.weight,  # B - W [N]: > 0 floats up, < 0 sinks
         "r_g": v.r_g.tolist(),
         "r_b": v.r_b.tolist(),
         "added_mass": dict(zip(("X_udot", "Y_vdot", "Z_wdot", "N_rdot"), v.added_mass.tolist())),
@@ -179,7 +180,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
     print(f"{v.name}: {v.description}")
     print(f"  file        {v.file}")
     print(f"  mass        {v.mass:g} kg   I_zz {v.I_zz:g} kg m^2")
-    print(f"  weight      {v.weight:.2f} N   buoyancy {v.buoyancy:.2f} N   net {v.buoyancy - v.weight:+.2f} N (up)")
+    print(f"  weight      {v.weight:.2f} N   buoyancy {v.buoyancy:.2f} N   {_net_buoyancy(v.weight, v.buoyancy)}")
     print("  added mass  " + "  ".join(f"{k} {val:g}" for k, val in info["added_mass"].items()))
     print("  damping     DOF      linear   |x|x      x^3")
     for dof, d in info["damping"].items():
@@ -196,6 +197,16 @@ def _cmd_show(args: argparse.Namespace) -> int:
     for label, row in zip("XYZKMN", B):
         print(f"            {label} " + "".join(f"{x:9.4f}" for x in row))
     return 0
+
+
+def _net_buoyancy(weight: float, buoyancy: float) -> str:
+    """B - W in words. z is down (NED): the net force of gravity and buoyancy on the hull is
+    W - B along +z, so W > B sinks the vehicle and B > W floats it up (docs/conventions.md)."""
+    net = buoyancy - weight
+    if abs(net) < 0.005:  # what the two-decimal figures above cannot tell apart
+        return "net buoyancy B - W 0.00 N: neutral"
+    what = "floats up when unpowered" if net > 0 else "sinks when unpowered"
+    return f"net buoyancy B - W {net:+.2f} N: {what}"
 
 
 def _cmd_check(args: argparse.Namespace) -> int:

@@ -143,7 +143,8 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
             ax.plot(t, est, color="tab:red", lw=1.0, label="estimate")
             if var is not None:
                 sd = 2 * np.sqrt(np.maximum(var, 0))
-                ax.fill_between(t, est - sd, est + sd, color="tab:red", alpha=0.15, lw=0)
+                ax.fill_between(t, est - sd, est + sd, color="tab:red", alpha=0.15, lw=0,
+                                label="estimate +-2 sigma")
         ax.set_ylabel(label)
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)

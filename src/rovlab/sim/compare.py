@@ -552,14 +552,15 @@ def figure(path: Any, comparison: Mapping[str, Any], kept: Mapping[str, list[Sim
         elif "est_b_w" in c:
             ax[3].plot(t, c["est_b_w"], color=col, lw=1.0, label=f"{ctl}: bias estimate b_w")
     t0 = comparison["change_s"]
-    for a in ax:
-        a.axvline(t0, color="0.6", lw=0.8)
+    ax[1].axhspan(-100 * BAND_M, 100 * BAND_M, color="0.9", zorder=0,
+                  label=f"±{100 * BAND_M:g} cm (settling band)")
+    for i, a in enumerate(ax):
+        a.axvline(t0, color="0.6", lw=0.8, label=f"change at {t0:g} s" if i == 0 else None)
         a.grid(alpha=0.3)
         a.legend(fontsize=7, loc="best")
     ax[0].invert_yaxis()
     ax[0].set_ylabel("depth z [m] (down)")
     ax[1].set_ylabel("z - z_m [cm]")
-    ax[1].axhspan(-100 * BAND_M, 100 * BAND_M, color="0.9")
     ax[2].set_ylabel("heave force Z [N]")
     ax[3].set_ylabel("net down force [N]")
     ax[3].set_xlabel("time [s]")
