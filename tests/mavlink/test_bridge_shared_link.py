@@ -10,6 +10,7 @@ from __future__ import annotations
 import collections
 import importlib.util
 import os
+import random
 import sys
 import threading
 import time
@@ -65,7 +66,10 @@ def test_4_7_names_live_gain_and_a_rate_the_bridge_cannot_get():
                 elif what == "att":
                     fake.mav.attitude_send(int((now - start) * 1000), 0.0, 0.0, 0.2, 0.0, 0.0, 0.0)
                 else:
-                    fake.mav.scaled_pressure2_send(int((now - start) * 1000), 1013.25 + 98.2, 98.2, 1500)
+                    # with a live sensor's noise: a frozen value is a stuck sensor, and the bridge does not
+                    # hold depth on one
+                    fake.mav.scaled_pressure2_send(int((now - start) * 1000), 1013.25 + 98.2 + random.gauss(0.0, 0.2),
+                                                   98.2, 1500)
                     fake.mav.servo_output_raw_send(int((now - start) * 1e6), 0, *([1500] * 16))
             while (msg := fake.recv_match(blocking=False)) is not None:
                 kind = msg.get_type()

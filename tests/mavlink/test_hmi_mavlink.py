@@ -64,7 +64,7 @@ def test_hmi_server_on_the_bridge(tmp_path):
             await ws.send_str(json.dumps({"cmd": "reference", "id": 3, "depth_m": 1.5}))
             reply = await _next(ws, "reply")
             assert reply["id"] == 3 and reply["ok"]
-            assert bridge.core.engaged and bridge.core.reference[2] == 1.5
+            assert bridge.engaged and bridge.core.reference[2] == 1.5  # held once the vehicle is armed in MANUAL
             await ws.send_str(json.dumps({"cmd": "start", "id": 4}))  # a vehicle has its own clock
             err = await _next(ws, "error")
             assert err["id"] == 4 and "own clock" in err["message"]

@@ -336,9 +336,13 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
         if time.monotonic() >= next_print and bridge.core.last is not None:
             next_print += args.status_every
             o = bridge.core.last
-            print(f"t={o.t:7.1f} s  z={o.x[0]:.3f} m  psi={math.degrees(o.x[1]):6.1f} deg  "
+            predicted = " (PREDICTED: no depth sensor)" if bridge.depth_problem is not None else ""
+            held = "holding" if bridge.core.engaged else (f"not holding ({bridge.hold_blocked})" if bridge.hold_blocked
+                                                           else "not holding")
+            print(f"t={o.t:7.1f} s  z={o.x[0]:.3f} m{predicted}  psi={math.degrees(o.x[1]):6.1f} deg  "
                   f"tau_Z={o.tau[2]:6.2f} N  sensors={o.sensor_status}  "
-                  f"{'FAILSAFE ' if bridge.failsafe else ''}{'armed' if bridge.armed else 'disarmed'}", flush=True)
+                  f"{'FAILSAFE ' if bridge.failsafe else ''}{'armed' if bridge.armed else 'disarmed'}, {held}",
+                  flush=True)
     c = bridge.counts
     print(f"rovlab mavlink bridge: stopped ({c['received']} messages in, {c['commands']} commands out, "
           f"{c['failsafes']} telemetry failsafes)" + (f"; recording: {args.record}" if args.record else ""),

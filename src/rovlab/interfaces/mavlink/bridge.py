@@ -26,9 +26,22 @@ commands go out at a fixed rate (``command_hz``) and their change per second is 
 (``max_input_rate``); with no telemetry for ``telemetry_timeout_s`` (default 0.5 s) it sends
 neutral commands (no slew limit on the way to neutral); with ``arm`` it puts the vehicle in
 MANUAL and arms it -- once: a vehicle disarmed afterwards (by a pilot or a failsafe) stays
-disarmed -- and on close it sends neutral and disarms what it armed. The controller is
-engaged only once a reference is set (CLI ``--depth``/``--heading-deg`` or the HMI); before that
-nothing is commanded and a pilot can fly the vehicle as usual.
+disarmed -- sending neutral inputs until it is armed (ArduSub refuses to arm on a stick that is
+not neutral: "Arm: Yaw (RC4) is not neutral"), and on close it sends neutral and disarms what it
+armed. Nothing is commanded before a reference is set (CLI ``--depth``/``--heading-deg`` or the
+HMI): a pilot can fly the vehicle as usual.
+
+A reference is *held* (the node core's controller engaged) only while the vehicle obeys the
+bridge's inputs -- armed, in MANUAL -- and the bridge can see it: with telemetry and a plausible
+depth sensor. Otherwise the controller is disengaged, so the filter does not predict the motion
+of thrust that is not applied (and the controller does not wind up on it), and neutral inputs
+are sent. The reference waits for the vehicle to be armed in MANUAL; it is dropped (said) when the
+vehicle is disarmed or leaves MANUAL while held (a pilot or a failsafe took over; set it again to
+resume). A depth sensor that reads an implausible value (SCALED_PRESSURE2 outside
+PLAUSIBLE_DEPTH_M, e.g. ArduSub SITL started at a home 584 m above sea level reports about
+-57 600 hPa) or whose channel the filter has lost stops the control loudly -- the value is named,
+and no depth is ever flown on the filter's prediction: neutral inputs, as ArduSub's own
+failsafes do -- until it reads plausibly again.
 """
 
 from __future__ import annotations
@@ -44,9 +57,15 @@ import numpy as np
 
 from rovlab.allocation.mixing import Mixer
 from rovlab.interfaces.mavlink import dialect, mavutil
-from rovlab.interfaces.mavlink.ardusub import DATA_STREAM_NAMES, MODES, MY_GCS, MY_GCS_HIGH, STREAM_OF_MESSAGE
+from rovlab.interfaces.mavlink.ardusub import DATA_STREAM_NAMES, MODE_NAMES, MODES, MY_GCS, MY_GCS_HIGH, STREAM_OF_MESSAGE
 from rovlab.interfaces.mavlink.logs import SampleMap, TelemetryRecorder
-from rovlab.interfaces.mavlink.units import RC_CHANNEL, drain, manual_control_from_inputs, rc_pulse_from_input
+from rovlab.interfaces.mavlink.units import (
+    RC_CHANNEL,
+    depth_from_pressure,
+    drain,
+    manual_control_from_inputs,
+    rc_pulse_from_input,
+)
 from rovlab.interfaces.node.core import NodeCore
 from rovlab.params.design import DesignConfig
 from rovlab.params.vehicle import Vehicle
@@ -71,6 +90,10 @@ RATE_ASKS = 3  # requests in a row without the rate before the bridge says it ca
 RATE_BACKOFF_S = 5.0  # then it keeps asking at this interval
 RATE_RESETS_SAID = 3  # resets of one stream said in the log; later ones only counted
 COMMAND_MODES = ("manual_control", "rc_override")
+# a depth the pressure sensor can read: 2 m above the surface is 200 hPa below the surface pressure
+# (more than any weather change); 1100 m is deeper than any Blue Robotics sensor reads (Bar100: 1000 m)
+PLAUSIBLE_DEPTH_M = (-2.0, 1100.0)
+DEPTH_LOST_REPEAT_S = 10.0  # a repeating message (depth sensor lost, back, hold resumed) is said at most this often
 
 
 class MavlinkBridge:
@@ -140,7 +163,8 @@ class MavlinkBridge:
         self.sent: collections.deque[tuple[float, tuple[int, ...], bool]] = collections.deque(maxlen=2000)
         self.sent_gains: tuple[float, float] | None = None  # (pilot gain, JS_THR_GAIN) of the last MANUAL_CONTROL
         self.counts: dict[str, int] = {"received": 0, "bad_data": 0, "errors": 0, "commands": 0, "neutral": 0,
-                                       "failsafes": 0, "rate_requests": 0, "rate_resets": 0, "rate_failures": 0}
+                                       "failsafes": 0, "rate_requests": 0, "rate_resets": 0, "rate_failures": 0,
+                                       "implausible_depth": 0, "depth_lost": 0}
         # the telemetry rates we need: arrivals, when we last asked, requests in a row without the rate
         self.rate_wanted = {name: 1.0 / self.core.h for name in _STREAMS}
         self.rates: dict[str, float | None] = dict.fromkeys(_STREAMS)  # measured [Hz]; None before a full window
@@ -156,14 +180,39 @@ class MavlinkBridge:
         self._stop = threading.Event()
         self._last_command_time: float | None = None
         self._warned: set[str] = set()
+        # the set-point asked for (None: none); held only while the vehicle obeys (see the module)
+        self._ref_lock = threading.Lock()
+        self._wanted_ref: dict[str, float | None] | None = None
+        self.hold_blocked: str | None = None  # why a wanted reference is not held now (None: held or none)
+        self.depth_problem: str | None = None  # the depth sensor's problem now (None: plausible and fused)
+        self._said: dict[str, tuple[float, str]] = {}  # what a repeating message last said, and when
+        self._last_implausible: str | None = None
 
     # -- control from outside ------------------------------------------------------------------
     def set_reference(self, *, z: float | None = None, psi: float | None = None) -> None:
-        """Depth [m] / heading [rad] set-point; engages the controller (ValueError on bad values)."""
-        self.core.set_reference(z=z, psi=psi)
+        """Depth [m] / heading [rad] set-point (ValueError on bad values, nothing changes). Held
+        while the vehicle is armed in MANUAL and seen (see the module); until then it waits. A
+        value left None is the estimate's when the hold starts."""
+        with self._ref_lock:
+            obeying = self.core.engaged
+            self.core.set_reference(z=z, psi=psi)  # validates; engages
+            old = self._wanted_ref or {"z": None, "psi": None}
+            if obeying:  # held already: the values left None stay what they were
+                old = {"z": float(self.core.reference[2]), "psi": float(self.core.reference[3])}
+            self._wanted_ref = {"z": old["z"] if z is None else float(z), "psi": old["psi"] if psi is None else psi}
+            if not obeying:
+                self.core.disengage()  # until the vehicle obeys (the next step decides)
 
     def disengage(self) -> None:
-        self.core.disengage()
+        """Stop holding (the vehicle goes back to the pilot); the filter keeps running."""
+        with self._ref_lock:
+            self._wanted_ref = None
+            self.core.disengage()
+
+    @property
+    def engaged(self) -> bool:
+        """A set-point is wanted (held now, or waiting for the vehicle: ``hold_blocked`` says why)."""
+        return self._wanted_ref is not None
 
     def stop(self) -> None:
         self._stop.set()
@@ -222,10 +271,87 @@ class MavlinkBridge:
         self._housekeeping(now)
         if self.vehicle_problems is None and self.vehicle_seen:
             self._check_vehicle_file(now)
-        if self.core.engaged and self.vehicle_seen and self.vehicle_problems == [] and now >= self._due["command"] \
-                and self._gains_known(now):
+        self._check_depth(now)
+        self._update_hold(now)
+        arming = self.want_arm and not self.armed
+        if (self.engaged or arming) and self.vehicle_seen and self.vehicle_problems == [] \
+                and now >= self._due["command"] and self._gains_known(now):
             self._due["command"] = max(self._due["command"] + self.command_period, now)
             self._command(now)
+
+    def _update_hold(self, now: float) -> None:
+        """Engage the node core's controller while the vehicle obeys and is seen, disengage it
+        otherwise; drop the reference when a pilot or a failsafe took the vehicle (see the module)."""
+        with self._ref_lock:
+            wanted = self._wanted_ref
+            if wanted is None:
+                self.hold_blocked = None
+                return
+            held = self.core.engaged
+            in_manual = self.mode == MODES["MANUAL"]
+            if held and not (self.armed and in_manual):
+                mode = self.mode if self.mode is not None else -1
+                what = "disarmed" if not self.armed else f"switched to mode {MODE_NAMES.get(mode, mode)}"
+                self.log(f"the vehicle was {what} while the bridge held its set-point: control stops and the set-point "
+                         "is dropped (a pilot or a failsafe has the vehicle; set a set-point again to resume)")
+                self._wanted_ref = None
+                self.core.disengage()
+                self.hold_blocked = None
+                return
+            if self.vehicle_problems != []:
+                blocked: str | None = "the vehicle file is not checked against the vehicle yet"
+            elif not self.armed:
+                blocked = "waiting for the vehicle to be armed in MANUAL"
+            elif not in_manual:
+                blocked = "waiting for the vehicle to be in MANUAL"
+            elif self.telemetry_lost(now):
+                blocked = "no telemetry"
+            elif self.depth_problem is not None:
+                blocked = "depth sensor: " + self.depth_problem
+            else:
+                blocked = None
+            if blocked is None and not held:
+                self.core.set_reference(z=wanted["z"], psi=wanted["psi"])
+                # a hold that stops and resumes (telemetry, depth sensor) keeps the set-point it started with
+                self._wanted_ref = {"z": float(self.core.reference[2]), "psi": float(self.core.reference[3])}
+                self._say_limited("hold", f"holding depth {self.core.reference[2]:.2f} m, heading "
+                                          f"{math.degrees(self.core.reference[3]):.1f} deg", now)
+            elif blocked is not None and held:
+                self.core.disengage()
+            self.hold_blocked = blocked
+
+    def _check_depth(self, now: float) -> None:
+        """The depth sensor's state: an implausible reading (found by _plausible_pressure) or a
+        pressure channel the filter has lost. Said loudly, with the value (again when its kind
+        changes, else every DEPTH_LOST_REPEAT_S while it lasts); the hold stops (_update_hold)
+        until it is back."""
+        problem = self._last_implausible
+        kind = "implausible"
+        last = self.core.last
+        if problem is None and last is not None:
+            labels = [lab for c, lab in zip(self.core.channels, last.channel_status)
+                      if c.quantity == "z" and self.core.sensor_of_kind("pressure") == c.sensor]
+            bad = [lab for lab in labels if lab not in ("ok", "recovering")]
+            if bad:
+                problem = kind = f"the filter has lost the pressure channel ({bad[0]}): its depth is a prediction"
+        if problem is not None:
+            if self.depth_problem is None:
+                self.counts["depth_lost"] += 1
+            n = self.counts["depth_lost"]
+            self._say_limited("depth", f"DEPTH SENSOR: {problem}; no depth control on a predicted depth: neutral "
+                                       f"commands" + (f" (episode {n})" if n > 1 else ""), now, key_text=kind)
+        elif self.depth_problem is not None:
+            self._say_limited("depth-back", "depth sensor plausible and fused again", now)
+        self.depth_problem = problem
+
+    def _say_limited(self, key: str, text: str, now: float, *, key_text: str | None = None) -> None:
+        """Log a message that may repeat: when its text (or ``key_text``) changed, else at most every
+        DEPTH_LOST_REPEAT_S (a sensor that comes and goes at the control rate does not flood the log)."""
+        what = text if key_text is None else key_text
+        last = self._said.get(key)
+        if last is None or last[1] != what or now - last[0] >= DEPTH_LOST_REPEAT_S:
+            self._said[key] = (now, what)
+            self.log(text)
 
     # -- incoming ------------------------------------------------------------------------------
     def _handle(self, msg: Any, now: float, wall: float) -> None:
@@ -279,9 +405,30 @@ class MavlinkBridge:
             n = len(self.mixer.thruster_names)
             self.servo_pwm = np.array([float(fields.get(f"servo{i + 1}_raw", 0)) for i in range(n)])
             return
+        if kind == "SCALED_PRESSURE2" and not self._plausible_pressure(fields):
+            return
         for column, value in self.smap.samples(kind, fields).items():
             sensor, quantity = self._sample_of[column]
             self.core.push(sensor, quantity, value, now)
+
+    def _plausible_pressure(self, fields: dict[str, Any]) -> bool:
+        """Whether a SCALED_PRESSURE2 reads a depth within PLAUSIBLE_DEPTH_M; an implausible one is
+        counted, named (by _check_depth) and not fused."""
+        press = fields.get("press_abs")
+        v = self.vehicle
+        depth = depth_from_pressure(float(press) if isinstance(press, (int, float)) else math.nan,
+                                    water_density=v.water_density, gravity=v.gravity, surface_hpa=self.smap.surface_hpa)
+        lo, hi = PLAUSIBLE_DEPTH_M
+        if math.isfinite(depth) and lo <= depth <= hi:
+            self._last_implausible = None
+            return True
+        self.counts["implausible_depth"] += 1
+        hint = " (ArduSub SITL: start it with --home at altitude 0)" if isinstance(press, (int, float)) and press < 0 \
+            else ""
+        self._last_implausible = (f"SCALED_PRESSURE2 press_abs = {press!r} hPa is implausible: depth "
+                                  f"{depth:.1f} m with surface {self.smap.surface_hpa:.2f} hPa, expected {lo:g} .. "
+                                  f"{hi:g} m{hint}; its samples are rejected")
+        return False
 
     def _on_param(self, msg: Any) -> None:
         name = str(msg.param_id).split("\x00", 1)[0]
@@ -511,7 +658,10 @@ class MavlinkBridge:
             self.failsafe = False
             self.log("telemetry back: control resumes")
         last = self.core.last
-        if last is None or not last.engaged:
+        if not self.core.engaged or last is None or not last.engaged:
+            # arming, a set-point waiting for the vehicle, or a hold stopped: neutral (no slew limit), which
+            # also keeps ArduSub's pilot-input failsafe (FS_PILOT_INPUT) from disarming a vehicle we armed
+            self._send_inputs(np.zeros(4), now, neutral=True)
             return
         wanted = self.mixer.inputs_for_outputs(self.mixer.outputs_from_pwm(last.pwm_us))
         dt = self.command_period if self._last_command_time is None else max(now - self._last_command_time, 0.0)

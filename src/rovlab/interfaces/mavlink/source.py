@@ -64,10 +64,11 @@ class MavlinkSource:
         return {
             "time_s": core.time,
             "reference": {"z": float(core.reference[2]), "psi": float(core.reference[3]), "schedule": False},
-            "engaged": bool(core.engaged),
+            "engaged": bool(br.engaged),  # a set-point is wanted (held while the vehicle obeys: vehicle.holding)
             "sensors": dict(core.sensor_enabled),
             "filter_modes": core.filter_modes(),
             "vehicle": {"seen": br.vehicle_seen, "armed": br.armed, "mode": br.mode, "failsafe": br.failsafe,
+                        "holding": bool(core.engaged), "hold_blocked": br.hold_blocked, "depth_problem": br.depth_problem,
                         "pilot_gain": br.pilot_gain(), "parameter_names": br.firmware_names,
                         "rates_hz": dict(br.rates), "rates_short": sorted(br.rate_short)},
         }
