@@ -8,9 +8,9 @@ Measured on dp-station-keeping shortened to 20 s (2026-11-27): force_psd and bia
 axes, initial_std 1e4 m / 720 deg / 10 m/s / 1e4 N, bandwidth, reference_bandwidth and
 max_speed 1e6: finite. Past the bound: bias_psd 2e298 and force_psd 1e300 LinAlgError,
 initial_std 1e300 NaN variances, bandwidth 1e300 and reference_bandwidth 1e300 NaN.
-Not covered by a bound on magnitude, and left for the EKF's reader (rovlab/estimation/ekf.py,
-read_ekf_table, which another engineer owns; marked xfail here): initial_std 1e6 (LinAlgError in
-the EKF kernel after a few seconds) and a known current of 5 m/s (the same)."""
+Not covered by a bound on magnitude, so bounded by physical ranges in the EKF's reader
+(rovlab/estimation/ekf.py, read_ekf_table): initial_std 1e6 (LinAlgError in the EKF kernel after a
+few seconds) and a known current of 5 m/s (the same)."""
 
 from __future__ import annotations
 
@@ -80,9 +80,6 @@ def test_rovlab_design_and_simulate_refuse_the_fuzzers_bias_psd(tmp_path, capsys
     assert "Traceback" not in err and "ekf.bias_psd.X" in err and not out.exists(), err
 
 
-@pytest.mark.xfail(strict=True, reason="needs the physical ranges in rovlab/estimation/ekf.py's read_ekf_table "
-                                       "(owned by another engineer): per_key(..., plausible=STATE_KEY_RANGES) and a "
-                                       "current range")
 @pytest.mark.parametrize("key,sub,value", [("initial_std", "x", 1e6), ("current", "north", 5.0)])
 def test_values_that_break_the_ekf_kernel_are_refused_by_its_reader(key, sub, value):
     with pytest.raises(ConfigError, match=rf"ekf\.{key}\.{sub}: got"):

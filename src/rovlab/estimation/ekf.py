@@ -83,7 +83,7 @@ from rovlab.estimation.fusion import new_channel_state
 from rovlab.estimation.kalman import correct_arrays, work_size
 from rovlab.estimation.model import channel_config, make_channels, observability, startup_time, unobservable_problem
 from rovlab.models import kinetics as kin
-from rovlab.params.design import BIAS_TIME_RANGE, DesignConfig, per_key
+from rovlab.params.design import BIAS_TIME_RANGE, PSD_RANGE, STATE_KEY_RANGES, DesignConfig, per_key
 from rovlab.params.validate import ConfigError, Problem, TableReader
 from rovlab.params.vehicle import Vehicle
 
@@ -498,18 +498,27 @@ class EKFModel(NamedTuple):
         return EKF_STATES
 
 
+# A known current per NED component [m/s]: BlueROV-class vehicles make 0.9-0.95 m/s flat out (the
+# packaged vehicles' thrust against their drag), so a 2 m/s current (~4 knots) is already beyond
+# any station keeping; 5 m/s made the EKF kernel fail (issue 28, fuzzing)
+KNOWN_CURRENT_RANGE = (-2.0, 2.0)
+
+
 def read_ekf_table(t: TableReader) -> EKFConfig:
     """Read the [ekf] table of a design file with the loader's reader (closed schema; every problem collected)."""
     base = EKFConfig()
     source = t.string("source")
-    fpsd = per_key(t, "force_psd", DOFS, base.force_psd, nonnegative=True, what="N^2/Hz or (N m)^2/Hz")
-    bpsd = per_key(t, "bias_psd", DOFS, base.bias_psd, nonnegative=True, what="N^2/s per s (PSD of the bias driver)")
+    fpsd = per_key(t, "force_psd", DOFS, base.force_psd, nonnegative=True, plausible=PSD_RANGE,
+                   what="N^2/Hz or (N m)^2/Hz")
+    bpsd = per_key(t, "bias_psd", DOFS, base.bias_psd, nonnegative=True, plausible=PSD_RANGE,
+                   what="N^2/s per s (PSD of the bias driver)")
     bT = per_key(t, "bias_time_constant_s", DOFS, base.bias_time_constant_s, positive=True, what="s")
     for i, k in enumerate(DOFS):
         if np.isfinite(bT[i]) and not BIAS_TIME_RANGE[0] <= bT[i] <= BIAS_TIME_RANGE[1]:
             t.problem(f"bias_time_constant_s.{k}", float(bT[i]), f"a time in [{BIAS_TIME_RANGE[0]:g}, "
                       f"{BIAS_TIME_RANGE[1]:g}] s")
-    cur = per_key(t, "current", ("north", "east", "down"), base.current, what="m/s, NED")
+    cur = per_key(t, "current", ("north", "east", "down"), base.current, plausible=KNOWN_CURRENT_RANGE,
+                  what="m/s, NED")
     substeps = t.integer("substeps", base.substeps, lo=1)
     dead: list[str] = []
     if t.has("dead_reckoning"):
@@ -525,8 +534,10 @@ def read_ekf_table(t: TableReader) -> EKFConfig:
     factors = tuple(f for _, f in _EKF_STATE_KEYS.values())
     raw_x0 = t.data.get("initial_state")
     b_z_given = isinstance(raw_x0, dict) and "b_Z" in raw_x0
-    x0 = per_key(t, "initial_state", keys, base.initial_state / np.array(factors), factors=factors)
-    std = per_key(t, "initial_std", keys, base.initial_std / np.array(factors), factors=factors, nonnegative=True)
+    x0 = per_key(t, "initial_state", keys, base.initial_state / np.array(factors), factors=factors,
+                 plausible=STATE_KEY_RANGES)
+    std = per_key(t, "initial_std", keys, base.initial_std / np.array(factors), factors=factors, nonnegative=True,
+                  plausible=STATE_KEY_RANGES)
     t.finish()
     for arr in (fpsd, bpsd, bT, cur, x0, std):
         arr.setflags(write=False)
