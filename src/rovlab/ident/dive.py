@@ -28,7 +28,7 @@ sec. 7.4; Jategaonkar 2015, Flight Vehicle System Identification, ch. 4): the mo
 with the logged input (RK4 on a fixed grid) and its outputs are fitted to the measured ones by
 ``scipy.optimize.least_squares`` (trust-region reflective, bounds: M > 0 with added mass <= 0,
 damping <= 0). To keep slow unmodelled forces (process noise, a tether) from accumulating in the
-integrated depth over minutes, the identification segment is cut into windows (30 s) that each
+integrated depth over minutes, the identification segment is cut into windows (15 s) that each
 start from their own fitted position and velocity (multiple shooting; Bock 1981). The start is a
 constrained linear least-squares fit of the equation of motion (equation error) on velocities and
 accelerations from a smoothing spline of the measurements (``scipy.optimize.lsq_linear`` with the
@@ -36,11 +36,13 @@ same bounds), or the vehicle file's guess where that fits the outputs better. Ea
 weight is its residual variance (estimated: ML with unknown noise levels; the vehicle file's
 variance is the first guess).
 
-**Uncertainty.** cov = (J^T J)^-1 S (J^T J)^-1 with J the Jacobian of the weighted residuals at
-the optimum and S a Newey-West (Bartlett-weighted) estimate of the residuals' score covariance per
-channel (Newey & West 1987), so that a smoothed AHRS heading, whose errors are correlated from
-sample to sample, does not give optimistic standard deviations; never smaller than the white-noise
-covariance s^2 (J^T J)^-1 (s^2 the residual variance).
+**Uncertainty.** Each window's initial state is profiled out, and the covariance of the global
+parameters is the largest (per parameter) of three estimates from the weighted Jacobian J and the
+residuals at the optimum: the white-noise s^2 (J^T J)^-1 (s^2 the residual variance), a Newey-West
+sandwich (Bartlett weights, per channel; Newey & West 1987) for a smoothed AHRS heading whose
+errors are correlated from sample to sample, and a window-clustered sandwich (Liang & Zeger 1986)
+for correlation within a window across channels, such as the drift a random force leaves in the
+integrated depth and heading.
 
 **Refusals.** A parameter whose standard deviation is large against what it does (added mass:
 30 % of it; a damping term: 30 % of the damping force at the log's RMS speed; a thrust scale: 0.1)
@@ -85,7 +87,7 @@ UNITS = {"heave": {"added_mass": "kg", "linear": "N s/m", "quadratic": "N s^2/m^
          "yaw": {"added_mass": "kg m^2", "linear": "N m s/rad", "quadratic": "N m s^2/rad^2", "thrust_scale": ""}}
 DEFAULT_FREE = ("added_mass", "linear", "quadratic", "net_buoyancy")
 GRID_S = 0.05  # model integration step [s]
-WINDOW_S = 30.0  # multiple-shooting window [s]
+WINDOW_S = 15.0  # multiple-shooting window [s]
 PREDICTION_STEP_S = 0.1
 HORIZONS = (1, 10, 100)
 MAX_REL = 0.3  # refusal threshold (module docstring)
@@ -441,36 +443,60 @@ def _held(data: DiveData, t: np.ndarray, col: int) -> np.ndarray:
     return out
 
 
-def _hac_covariance(J: np.ndarray, r: np.ndarray, channel_of: np.ndarray,
-                    order: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """(Newey-West, white-noise) covariances of a least-squares estimate from its weighted
-    Jacobian J and residuals r; ``order``: per channel, the residual indices in time order."""
-    n, p = J.shape
-    JtJ = J.T @ J
-    inv = np.linalg.pinv(JtJ)
-    s2 = float(r @ r) / max(n - p, 1)
-    white = s2 * inv
-    S = np.zeros((p, p))
-    for idx in order:
+def _covariances(prob: _Problem, J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(white-noise, Newey-West, window-clustered) covariances of the global parameters from the
+    weighted Jacobian J and residuals r at the optimum.
+
+    Each window's own initial state is profiled out first (Frisch-Waugh-Lovell: the global
+    columns are projected onto the complement of the window's nuisance columns), so the scores
+    are those of the global parameters alone. Newey-West (Bartlett weights up to twice the lag at
+    which a channel's residual autocorrelation falls below 0.05) covers a smoothed AHRS; the
+    window-clustered sandwich (the windows' score sums, G/(G-1) and t(G-1) small-sample factors;
+    Liang & Zeger 1986) covers any correlation within a window, across channels too, e.g. the drift a random
+    force leaves in the integrated depth and heading."""
+    g = len(prob.free)
+    Jg = J[:, :g].copy()
+    for k, w in enumerate(prob.windows):
+        idx = np.concatenate([s[4] for s in w.samples])
+        Jn = J[idx, g + 2 * k:g + 2 * k + 2]
+        coef, *_ = np.linalg.lstsq(Jn, Jg[idx], rcond=None)
+        Jg[idx] -= Jn @ coef
+    n = r.size
+    A = np.linalg.pinv(Jg.T @ Jg)
+    white = float(r @ r) / max(n - J.shape[1], 1) * A
+    S = np.zeros((g, g))
+    for ci in range(len(prob.channels)):
+        idx = np.flatnonzero(prob.channel_of == ci)  # in time order (windows in order)
         if idx.size < 3:
             continue
-        g = J[idx] * r[idx, None]  # score contributions, time-ordered
+        sc = Jg[idx] * r[idx, None]
         e = r[idx]
         var = float(e @ e) / idx.size
         lag_max = 1
-        for lag in range(1, min(idx.size // 4, 400)):  # up to where the autocorrelation dies out
+        for lag in range(1, min(idx.size // 4, 400)):
             rho = float(e[:-lag] @ e[lag:]) / (idx.size * var) if var > 0 else 0.0
-            if rho < 0.05:
-                lag_max = lag
-                break
             lag_max = lag
+            if rho < 0.05:
+                break
         L = 2 * lag_max
-        S += g.T @ g
+        S += sc.T @ sc
         for lag in range(1, min(L, idx.size - 1) + 1):
-            wgt = 1.0 - lag / (L + 1.0)
-            G = g[:-lag].T @ g[lag:]
-            S += wgt * (G + G.T)
-    return inv @ S @ inv, white
+            G = sc[:-lag].T @ sc[lag:]
+            S += (1.0 - lag / (L + 1.0)) * (G + G.T)
+    hac = A @ S @ A
+    C = np.zeros((g, g))
+    for w in prob.windows:
+        idx = np.concatenate([s[4] for s in w.samples])
+        sw = Jg[idx].T @ r[idx]
+        C += np.outer(sw, sw)
+    G = len(prob.windows)
+    # few clusters: G/(G-1), and the t(G-1) quantile's excess over the normal one folded into the
+    # variance, so that +-2 sigma keeps its ~95 % (Cameron & Miller 2015, sec. VI)
+    from scipy.stats import t as student
+
+    widen = (float(student.ppf(0.975, G - 1)) / 1.959964) ** 2 if G > 1 else 1.0
+    cluster = (G / (G - 1) if G > 1 else 1.0) * widen * (A @ C @ A)
+    return white, hac, cluster
 
 
 # --------------------------------------------------------------------------------------------
@@ -553,8 +579,9 @@ def _hold_text(dof: str) -> str:
 
 def fit_dof(data: DiveData, dof: str, start: DofModel, t0: float, t1: float, *,
             free: Sequence[str] = DEFAULT_FREE, max_rel: float = MAX_REL, grid_s: float = GRID_S,
-            window_s: float = WINDOW_S) -> DofFit:
+            window_s: float | None = None) -> DofFit:
     """Output-error fit of one DOF on [t0, t1] (module docstring), with refusals."""
+    window_s = WINDOW_S if window_s is None else window_s
     from scipy.optimize import least_squares
 
     free = [k for k in KEYS if k in free and not (dof == "yaw" and k == "net_buoyancy")]
@@ -597,12 +624,11 @@ def fit_dof(data: DiveData, dof: str, start: DofModel, t0: float, t1: float, *,
         theta = th0
         r = prob.residuals(theta, weights)
         J = prob.jacobian(theta, weights)
-        # residual indices per channel, in time order (windows in order, samples in order within each)
-        order = [np.flatnonzero(prob.channel_of == ci) for ci in range(len(prob.channels))]
-        cov_hac, cov_white = _hac_covariance(J, r, prob.channel_of, order)
+        covs = _covariances(prob, J, r)
         g = len(cur)
-        var = np.maximum(np.diag(cov_hac)[:g], np.diag(cov_white)[:g])
+        var = np.max([np.diag(c) for c in covs], axis=0)
         sig = np.sqrt(var)
+        cov_hac = max(covs, key=lambda c: float(np.trace(c / np.maximum(var, 1e-300))))  # for the correlations
         model = prob.model(theta)
         # refuse the worst-determined parameter, if any, and fit again without it
         worst, worst_ratio = None, 1.0
@@ -786,7 +812,15 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] = DOF
         fits[dof] = fit_dof(data, dof, dof_model(vehicle, dof), a, t_split, free=chosen, max_rel=max_rel)
     pred = prediction_errors(data, {d: f.model for d, f in fits.items() if not f.refused_dof},
                              {d: dof_model(vehicle, d) for d in fits if not fits[d].refused_dof}, t_split, b)
-    return DiveFit(data.file, fits, (a, t_split), (t_split, b), pred, data.notes)
+    notes = data.notes
+    depth = data.channel("heave", "position")
+    if depth is not None and depth.y.size and abs(float(np.median(depth.y))) < 0.3:
+        from rovlab.models.kinetics import hull_height
+
+        notes += (f"the depth stays near the surface (median {float(np.median(depth.y)):.3g} m; the free surface cuts "
+                  f"the hull above {0.5 * hull_height(vehicle):.2f} m): a surface log; heave and yaw are identified "
+                  "below 1 m (rovlab lab plan-dive keeps the vehicle there)",)
+    return DiveFit(data.file, fits, (a, t_split), (t_split, b), pred, notes)
 
 
 def prediction_errors(data: DiveData, identified: Mapping[str, DofModel], start: Mapping[str, DofModel],
@@ -881,8 +915,8 @@ def provenance(fit: DiveFit, log_name: str) -> dict[str, str]:
                      "net_buoyancy": "restoring"}.get(p.key)
             if block:
                 blocks.setdefault(block, []).append(f"{p.name} sigma {p.sigma:.2g}")
-    head = (f"rovlab identify dive {log_name} (t {a:.1f}-{b:.1f} s; output error with Newey-West standard "
-            "deviations)")
+    head = (f"rovlab identify dive {log_name} (t {a:.1f}-{b:.1f} s; output error, standard deviations robust to "
+            "correlated errors)")
     return {blk: f"{head}: {', '.join(items)}" for blk, items in blocks.items()}
 
 

@@ -211,6 +211,7 @@ def plan_dive(vehicle: Vehicle, dofs: Sequence[str] = PLAN_DOFS, duration_s: flo
                     break
             else:
                 k = min(k + m, n)
+    Z, N = np.round(Z, 3), np.round(N, 5)  # as the plan file writes them (rovlab lab dive flies the file)
     settings = {"heave_speed": heave_speed, "yaw_rate": yaw_rate, "hold_s": list(hold_s), "rest_every_s": rest_every_s,
                 "rest_s": rest_s, "fraction": fraction, "amplitude": {d: float(a) for d, a in amp.items()}}
     return DivePlan(vehicle.name, dofs, dt, Z, N, float(depth_min), float(depth_max), float(mid), float(depth_gain),
@@ -302,7 +303,7 @@ def write_plan(path: str | Path, plan: DivePlan, expected: Sequence[Expected] = 
     doc["settings"] = s
     e = tomlkit.table()
     e["t_s"] = [round(float(x), 6) for x in change * plan.dt]
-    e["Z"] = [round(float(x), 4) for x in plan.Z[change]]
+    e["Z"] = [round(float(x), 3) for x in plan.Z[change]]
     e["N"] = [round(float(x), 5) for x in plan.N[change]]
     doc["excitation"] = e
     if expected:
