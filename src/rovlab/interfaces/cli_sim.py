@@ -248,6 +248,7 @@ def _write(out: Path, result, metrics, notes: list[str], *, figures: bool = True
 
 def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path, result, metrics, notes, *,
                  figures: bool = True, meanwhile=None):
+    from rovlab.sim.metrics import with_units
     from rovlab.sim.montecarlo import Progress, run_many, summarise_runs
     from rovlab.sim.output import write_json, write_monte_carlo
 
@@ -267,7 +268,7 @@ def _monte_carlo(data, file, seed, runs, workers, backend, scheduler, out: Path,
     summary["vehicle_steps_per_s"] = len(done) * n_plant / wall if wall > 0 else None
     metrics = dict(metrics)
     metrics["monte_carlo"] = summary
-    write_json(out / "metrics.json", metrics)  # the numbers first: a Ctrl-C while the figure is drawn keeps them
+    write_json(out / "metrics.json", with_units(metrics))  # the numbers first: a Ctrl-C while the figure is drawn keeps them
     write_monte_carlo(out / "monte_carlo", result.scenario.name, summary, done, result.columns["time_s"], notes=notes,
                       figures=figures)
     return summary
@@ -284,10 +285,20 @@ def _print_mc(summary: dict[str, Any]) -> None:
         print(f"  NEES: average {nees['mean']:.2f} for {nees['dof']} states (95 % bounds "
               f"{nees['mean_bounds'][0]:.2f}-{nees['mean_bounds'][1]:.2f}); "
               f"{100 * nees['share_inside']:.0f} % of time steps inside the per-step bounds")
-    for key in ("rms_error.z", "rms_error.psi", "settling_time_s.z", "overshoot.z"):
-        s = summary["metrics"].get(key)
-        if s and s.get("count"):
-            print(f"  {key:22s} mean {s['mean']:.4g}  std {s['std']:.3g}  [p5 {s['p5']:.4g}, p95 {s['p95']:.4g}]")
+        if summary.get("consistency_note"):
+            print(f"    ({summary['consistency_note']})")
+    deg = 180.0 / math.pi
+    for key, label, unit, k in (("rms_error.z", "estimation error RMS, z", "m", 1.0),
+                                ("rms_error.psi", "estimation error RMS, psi", "deg", deg),
+                                ("settling_time_s.z", "settling time z", "s", 1.0),
+                                ("overshoot.z", "overshoot z", "%", 100.0),
+                                ("tracking_rms.x", "tracking error RMS, x", "m", 1.0),
+                                ("tracking_rms.y", "tracking error RMS, y", "m", 1.0),
+                                ("tracking_horizontal_max_m", "largest horizontal excursion", "m", 1.0)):
+        st = summary["metrics"].get(key)
+        if st and st.get("count"):
+            print(f"  {label + ' [' + unit + ']':36s} mean {st['mean'] * k:.4g}  std {st['std'] * k:.3g}  "
+                  f"[p5 {st['p5'] * k:.4g}, p95 {st['p95'] * k:.4g}]")
 
 
 def _fmt(v: Any, k: float = 1.0, digits: int = 3) -> str:
@@ -296,26 +307,64 @@ def _fmt(v: Any, k: float = 1.0, digits: int = 3) -> str:
     return f"{v * k:.{digits}g}"
 
 
+def _cell(values: dict[str, Any], axis: str, width: int, *, percent: bool = False) -> str:
+    """A step-response cell: 'n/a' when the axis had no step, '-' when it did not settle."""
+    if axis not in values:
+        return f"{'n/a':>{width}s}"
+    if percent:
+        return f"{_fmt(values[axis], 100.0):>{width - 1}s}%"
+    return f"{_fmt(values[axis]):>{width}s}"
+
+
 def _print_summary(rows: list[tuple[str, dict[str, Any]]]) -> None:
+    """One line per case: the estimation error (what the filter got wrong), the step response
+    where the case has set-point changes, the drop-out drift and the NEES; then, for a case that
+    holds or follows x/y set-points, its positioning numbers."""
     deg = 180.0 / math.pi
-    head = f"{'case':22s} {'RMS z [m]':>10s} {'RMS psi [deg]':>13s} {'RMS w [m/s]':>11s} {'settle z [s]':>12s} " \
-           f"{'overshoot z':>11s} {'settle psi [s]':>14s} {'drop-out drift [deg]':>20s} {'NEES/dof':>9s}"
+    steps = any(m.get("settling_time_s") is not None for _, m in rows)
+    head = f"{'case':22s} {'est.err z [m]':>13s} {'est.err psi [deg]':>17s} {'est.err w [m/s]':>15s}"
+    if steps:
+        head += f" {'settle z [s]':>12s} {'overshoot z':>11s} {'settle psi [s]':>14s}"
+    head += f" {'drop-out drift [deg]':>20s} {'NEES/dof':>9s}"
     print(head)
+    unsettled = False
     for name, m in rows:
         rms = m["rms_error"]
         drift = m["dropouts"][0]["heading_drift_rad"] if m.get("dropouts") else None
         nees = m["nees"]["mean"] / m["nees"]["dof"] if m.get("nees") else None
-        print(f"{name:22s} {_fmt(rms.get('z')):>10s} {_fmt(rms.get('psi'), deg):>13s} {_fmt(rms.get('w')):>11s} "
-              f"{_fmt(m['settling_time_s'].get('z')):>12s} {_fmt(m['overshoot'].get('z'), 100):>10s}% "
-              f"{_fmt(m['settling_time_s'].get('psi')):>14s} {_fmt(drift, deg):>20s} {_fmt(nees):>9s}")
-    print("('-': not settled to 2 % within the run -- the thesis's heading LQR is slow, time constant ~17 s;"
-          " NEES/dof near 1 means the filter's covariance matches its errors)")
-    for name, m in rows:  # dynamic positioning: how well the reference model's path was followed
-        tr = m.get("tracking_rms")
-        if tr:
-            sat = (m.get("saturation") or {}).get("time_s")
-            print(f"{name}: tracking RMS x {_fmt(tr.get('x'))} m, y {_fmt(tr.get('y'))} m, z {_fmt(tr.get('z'))} m, "
-                  f"psi {_fmt(tr.get('psi'), deg)} deg; thrusters saturated {_fmt(sat)} s")
+        line = f"{name:22s} {_fmt(rms.get('z')):>13s} {_fmt(rms.get('psi'), deg):>17s} {_fmt(rms.get('w')):>15s}"
+        if steps:
+            settle, over = m.get("settling_time_s"), m.get("overshoot") or {}
+            if settle is None:  # station keeping: no step to settle from
+                line += f" {'n/a':>12s} {'n/a':>11s} {'n/a':>14s}"
+            else:
+                unsettled = unsettled or any(v is None for v in settle.values())
+                line += (f" {_cell(settle, 'z', 12)} {_cell(over, 'z', 11, percent=True)}"
+                         f" {_cell(settle, 'psi', 14)}")
+        line += f" {_fmt(drift, deg):>20s} {_fmt(nees):>9s}"
+        print(line)
+    notes = ["est.err: RMS of estimate - truth, the filter's error (not the control error)"]
+    if unsettled:
+        notes.append("'-' under settle: not within 2 % of the step (at least 5 mm, 0.5 deg) before the next "
+                     "set-point change or the end")
+    notes.append("NEES/dof near 1: the filter's covariance matches its errors"
+                 + (" (expected only where the plant is the filter's model, the observer plant)"
+                    if any(m.get("plant") not in (None, "observer") for _, m in rows) else ""))
+    print("(" + "; ".join(notes) + ")")
+    for name, m in rows:  # dynamic positioning: how well the controller held or followed its reference
+        tr, top = m.get("tracking_rms"), m.get("tracking_max") or {}
+        if not tr:
+            continue
+        sat = _fmt((m.get("saturation") or {}).get("time_s"))
+        rms_text = (f"RMS x {_fmt(tr.get('x'))} m, y {_fmt(tr.get('y'))} m, z {_fmt(tr.get('z'))} m, "
+                    f"psi {_fmt(tr.get('psi'), deg)} deg")
+        if m.get("task") == "station keeping":
+            print(f"{name}: station keeping, truth against the controller's reference: {rms_text}; largest "
+                  f"excursion horizontal {_fmt(m.get('tracking_horizontal_max_m'))} m, depth {_fmt(top.get('z'))} m, "
+                  f"heading {_fmt(top.get('psi'), deg)} deg; thrusters saturated {sat} s")
+        else:
+            print(f"{name}: tracking, truth against the controller's reference: {rms_text}; "
+                  f"thrusters saturated {sat} s")
 
 
 _COMPARISONS = ("heave-buoyancy-step", "heave-payload", "heave-tether")
@@ -402,7 +451,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                                         "consistent filter keeps it inside (Bar-Shalom et al. 2001, sec. 5.4).",
                          "metrics": {"nees": summary.get("nees"), "rms_error": {
                              k.split(".")[1]: v["mean"] for k, v in summary["metrics"].items()
-                             if k.startswith("rms_error.")}},
+                             if k.startswith("rms_error.")},
+                             **({"consistency_note": summary["consistency_note"]}
+                                if summary.get("consistency_note") else {})},
                          "figures": [nees_png] if nees_png.exists() else [],
                          "extra": f"seeds {summary['seeds'][0]}..{summary['seeds'][-1]}; {summary['wall_time_s']:.2f} s"})
     if args.compare_runs > 0 and not interrupted:  # Ctrl-C: the report of what ran, and stop

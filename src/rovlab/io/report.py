@@ -262,10 +262,13 @@ def _limit_to(ax, lines: Sequence[np.ndarray], margin: float = 0.15) -> None:
 
 
 def write_nees_figure(path: str | Path, t: np.ndarray, nees_runs: np.ndarray, bounds: Sequence[float],
-                      dof: int, title: str = "") -> Path:
-    """Average NEES over Monte Carlo runs against its chi-square bounds."""
+                      dof: int, title: str = "", *, note: str | None = None) -> Path:
+    """Average NEES over Monte Carlo runs against its chi-square bounds; ``note`` under the plot
+    (e.g. that the plant is not the filter's model, so the band is not expected to hold)."""
+    import textwrap
+
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(10, 3.5))
+    fig, ax = plt.subplots(figsize=(10, 3.5 + (0.6 if note else 0.0)))
     runs = np.asarray(nees_runs, dtype=float)
     ok = np.isfinite(runs)
     count = ok.sum(axis=0)
@@ -282,7 +285,11 @@ def write_nees_figure(path: str | Path, t: np.ndarray, nees_runs: np.ndarray, bo
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     ax.set_title(title)
-    fig.tight_layout()
+    if note:
+        fig.text(0.01, 0.01, "Note: " + "\n".join(textwrap.wrap(note, 150)), fontsize=7, va="bottom")
+        fig.tight_layout(rect=(0.0, 0.12, 1.0, 1.0))
+    else:
+        fig.tight_layout()
     return _save(fig, Path(path), plt)
 
 
@@ -348,24 +355,41 @@ def comparison_rows(comparison: Mapping[str, Any]) -> list[tuple[str, str]]:
 
 
 def summary_rows(metrics: Mapping[str, Any]) -> list[tuple[str, str]]:
-    """(label, value) rows of the headline numbers of one run's metrics (or of a comparison)."""
+    """(label, value) rows of the headline numbers of one run's metrics (or of a comparison): what
+    fits the run (metrics ``task``): the step response where the set-points change, the error
+    against the controller's reference and the largest excursion where it holds station."""
     if "controllers" in metrics:
         return comparison_rows(metrics)
     rows: list[tuple[str, str]] = []
     rms = metrics.get("rms_error", {})
-    for s, unit, k in (("z", "m", 1.0), ("psi", "deg", _DEG), ("w", "m/s", 1.0), ("r", "deg/s", _DEG)):
+    for s, unit, k in (("x", "m", 1.0), ("y", "m", 1.0), ("z", "m", 1.0), ("psi", "deg", _DEG), ("u", "m/s", 1.0),
+                       ("v", "m/s", 1.0), ("w", "m/s", 1.0), ("r", "deg/s", _DEG)):
         if s in rms:
-            rows.append((f"RMS estimation error {s} [{unit}]", _fmt(rms[s] * k)))
-    for axis, unit, _k in (("z", "s", 1.0), ("psi", "s", 1.0)):
-        st = metrics.get("settling_time_s", {}).get(axis)
-        rows.append((f"settling time {axis} [{unit}] (2 %)", _fmt(st)))
+            rows.append((f"RMS estimation error (estimate - truth) {s} [{unit}]", _fmt(rms[s] * k)))
+    for axis in ("z", "psi"):  # only the axes that had a set-point step
+        if axis in metrics.get("settling_time_s", {}):
+            rows.append((f"settling time {axis} [s] (2 %)", _fmt(metrics["settling_time_s"][axis])))
     for axis in ("z", "psi"):
-        ov = metrics.get("overshoot", {}).get(axis)
-        rows.append((f"overshoot {axis} [%]", _fmt(None if ov is None else 100 * ov, 3)))
+        if axis in metrics.get("overshoot", {}):
+            rows.append((f"overshoot {axis} [%]", _fmt(100 * metrics["overshoot"][axis], 3)))
+    tracking, largest = metrics.get("tracking_rms") or {}, metrics.get("tracking_max") or {}
+    holding = metrics.get("task") == "station keeping"
+    what = "station keeping" if holding else "tracking"
+    for a, unit, k in (("x", "m", 1.0), ("y", "m", 1.0), ("z", "m", 1.0), ("psi", "deg", _DEG)):
+        if a in tracking:
+            rows.append((f"{what}: RMS error {a} (truth - controller's reference) [{unit}]", _fmt(tracking[a] * k)))
+    if holding:
+        if metrics.get("tracking_horizontal_max_m") is not None:
+            rows.append(("station keeping: largest horizontal excursion [m]", _fmt(metrics["tracking_horizontal_max_m"])))
+        for a, label, unit, k in (("z", "depth", "m", 1.0), ("psi", "heading", "deg", _DEG)):
+            if a in largest:
+                rows.append((f"station keeping: largest {label} excursion [{unit}]", _fmt(largest[a] * k)))
+    if tracking and "saturation" in metrics:
+        rows.append(("thrusters saturated [s]", _fmt(metrics["saturation"].get("time_s"))))
     for d in metrics.get("dropouts", []):
         rows.append((f"heading drift during {d['sensor']} drop-out [deg]", _fmt(d["heading_drift_rad"] * _DEG)))
         rows.append(("max heading error during drop-out [deg]", _fmt(d["heading_error_max_rad"] * _DEG)))
-        rows.append(("depth error RMS during / before drop-out [m]",
+        rows.append(("depth estimation error RMS during / before drop-out [m]",
                      f"{_fmt(d['depth_error_rms_during'])} / {_fmt(d['depth_error_rms_before'])}"))
     nees = metrics.get("nees")
     if nees:
@@ -374,6 +398,8 @@ def summary_rows(metrics: Mapping[str, Any]) -> list[tuple[str, str]]:
     nis = metrics.get("nis")
     if nis:
         rows.append(("average NIS per measurement (expected 1)", _fmt(nis["mean"])))
+    if metrics.get("consistency_note") and (nees or nis):
+        rows.append(("note on NEES/NIS", html.escape(str(metrics["consistency_note"]))))
     return rows
 
 

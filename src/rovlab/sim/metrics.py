@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from rovlab.core.angles import wrap
+from rovlab.core.units import unit as quantity_unit
 from rovlab.estimation import consistency as cons
 
 
@@ -276,7 +277,9 @@ def positioning_metrics(columns: dict[str, np.ndarray], dropouts: Sequence[Any] 
     * ``rms_error``: RMS of estimate - truth per state (x ... r; biases too on the observer plant);
     * ``tracking_rms``: RMS of truth - reference per axis (x, y, z in m, psi in rad), against the
       controller's smooth reference (``ctrl_<axis>_d``, its reference model) where it logs one,
-      else against the set-point ``ref_<axis>``; ``setpoint_error_final``: truth - set-point at the end;
+      else against the set-point ``ref_<axis>``; ``tracking_max``: the largest |truth - reference|
+      per axis and ``tracking_horizontal_max_m`` the largest horizontal distance (the excursion of a
+      vehicle holding station); ``setpoint_error_final``: truth - set-point at the end;
     * ``thrusters``: mean and largest |PWM - 1500| per thruster [us];
     * ``saturation``: time [s] and share of the run in which the allocation could not give the
       demanded wrench (achieved != demanded in any DOF);
@@ -304,6 +307,11 @@ def positioning_metrics(columns: dict[str, np.ndarray], dropouts: Sequence[Any] 
         if f"ref_{a}" in c:
             final[a] = float(_err(c, f"true_{a}", f"ref_{a}", a == "psi")[-1])
     out["tracking_rms"] = tracking
+    out["tracking_max"] = {a: float(np.nanmax(np.abs(_err(c, f"true_{a}", ref, a == "psi"))))
+                           for a, ref in against.items()}
+    if "x" in against and "y" in against:
+        out["tracking_horizontal_max_m"] = float(np.nanmax(np.hypot(_err(c, "true_x", against["x"], False),
+                                                                    _err(c, "true_y", against["y"], False))))
     out["tracking_reference"] = against
     out["setpoint_error_final"] = final
     usage = {}
@@ -337,3 +345,129 @@ def positioning_metrics(columns: dict[str, np.ndarray], dropouts: Sequence[Any] 
                                                   for a in against}})
     out["position_dropouts"] = drops
     return out
+
+
+def holds_station(columns: Mapping[str, Any]) -> bool:
+    """Whether a run is station keeping: its controller follows north and east set-points
+    (``ref_x`` and ``ref_y`` logged) and none of its set-points changes during the run (a vehicle
+    that starts off the set-point and is brought to it counts). Settling time and overshoot do not
+    describe such a run; its error against the controller's reference and its largest excursion do."""
+    if "ref_x" not in columns or "ref_y" not in columns:
+        return False
+    for name in columns:
+        if name.startswith("ref_"):
+            v = np.asarray(columns[name], dtype=float)
+            v = v[np.isfinite(v)]
+            if v.size and float(v.max() - v.min()) > 0.0:
+                return False
+    return True
+
+
+# --------------------------------------------------------------------------------------------
+# The units of metrics.json (issue 28: its keys said no unit)
+# --------------------------------------------------------------------------------------------
+
+_FRACTION = "1 (fraction)"
+_CHI2 = "1 (chi-square statistic)"
+_COUNT = "count"
+
+
+def _unit_of(path: Sequence[str]) -> str | None:
+    """The unit of the number at ``path`` (keys, with "[]" for a list item) of a run's metrics or
+    of a Monte Carlo summary; None for what is a label rather than a quantity (seed, seeds)."""
+    last = path[-1] if path else ""
+    parent = path[-2] if len(path) > 1 else ""
+    keys = [k for k in path if k != "[]"]
+    top = keys[0] if keys else ""
+    if last == "[]":  # a list of numbers: the unit of what it lists
+        last, parent = parent, (path[-3] if len(path) > 2 else "")
+    if top in ("seed", "seeds"):
+        return None
+    if top in ("nees", "nis") or (top == "monte_carlo" and len(keys) > 1 and keys[1] in ("nees", "nis")):
+        return {"dof": _COUNT, "runs": _COUNT, "share_inside": "1 (fraction of time steps)",
+                "mean_inside": "1 (1: inside; over runs, the fraction inside)"}.get(last, _CHI2)
+    if top == "sensor_losses" or (top == "monte_carlo" and len(keys) > 1 and keys[1] == "sensor_losses"):
+        return "s" if last == "t_s" else _COUNT
+    if top == "monte_carlo":
+        return {"runs": _COUNT, "runs_requested": _COUNT, "wall_time_s": "s",
+                "vehicle_steps_per_s": "1/s (plant steps per second of wall time)"}.get(last)
+    if parent in ("rms_error", "tracking_rms", "tracking_max", "setpoint_error_final", "before",
+                  "tracking_rms_during") and quantity_unit(last):
+        return quantity_unit(last)
+    if top == "dropouts" and len(keys) == 4 and keys[1] == "during" and quantity_unit(keys[2]):
+        return quantity_unit(keys[2])  # dropouts[].during.<state>.drift, .max_abs_error, .rms_error
+    if parent == "settling_time_s":
+        return "s"
+    if last == "overshoot" or parent == "overshoot":
+        return "1 (fraction of the step size)"
+    if top == "steps" and last in ("from", "to"):
+        return "m for axis z, rad for axis psi"
+    special = {"max_step_psi": "rad", "max_step_r": "rad/s", "peak_abs_tau_N": "N m", "psi_error_at_return": "rad",
+               "heading_error_rms_before": "rad", "depth_error_rms_before": "m", "depth_error_rms_during": "m",
+               "share": _FRACTION}
+    if last in special:
+        return special[last]
+    for suffix, u in (("_per_s", "1/s"), ("_s", "s"), ("_m", "m"), ("_rad", "rad"), ("_us", "us")):
+        if last.endswith(suffix):
+            return u
+    return None
+
+
+def _key_path(dotted: str) -> list[str]:
+    """["steps", "[]", "overshoot"] from a flattened Monte Carlo key "steps[0].overshoot"."""
+    out: list[str] = []
+    for part in dotted.split("."):
+        name, bracket, _ = part.partition("[")
+        out.append(name)
+        if bracket:
+            out.append("[]")
+    return out
+
+
+def units_table(metrics: Mapping[str, Any]) -> dict[str, str]:
+    """The unit of every number in a metrics.json (a run's, with or without its Monte Carlo block,
+    or monte_carlo/metrics.json): key path (dots between keys, "[]" for a list's items) -> unit.
+    SI throughout (docs/conventions.md); "1 (...)" is a dimensionless number, "count" a count.
+    Each statistic of ``monte_carlo.metrics.<key>`` (mean, std, min, p5, median, p95, max) is in
+    the unit of ``<key>`` (its ``count`` in runs)."""
+    table: dict[str, str] = {}
+
+    def walk(value: Any, path: list[str]) -> None:
+        if isinstance(value, Mapping):
+            if path == ["monte_carlo", "metrics"]:
+                for key in value:
+                    u = _unit_of(_key_path(key))
+                    if u is not None:
+                        table[f"monte_carlo.metrics.{key}"] = u
+                return
+            for k, v in value.items():
+                walk(v, [*path, str(k)])
+        elif isinstance(value, (list, tuple)):
+            for item in value:
+                walk(item, [*path, "[]"])
+        elif value is None or (isinstance(value, (int, float)) and not isinstance(value, bool)):  # None: not reached
+            u = _unit_of(path)
+            if u is not None:
+                table[".".join(path).replace(".[]", "[]")] = u
+
+    walk(metrics, [])
+    return table
+
+
+def with_units(metrics: Mapping[str, Any]) -> dict[str, Any]:
+    """``metrics`` with its units table as ``units`` (what metrics.json holds)."""
+    out = {k: v for k, v in metrics.items() if k != "units"}
+    out["units"] = units_table(out)
+    return out
+
+
+def consistency_note(plant: str) -> str | None:
+    """Why NEES/NIS outside their chi-square bounds may be no fault: they are exact only for a
+    filter whose model and noise are the plant's (the observer plant is the estimator's own linear
+    model and noise). None for that plant."""
+    if plant == "observer":
+        return None
+    return (f"the {plant} plant is outside the filter's model (its nonlinear dynamics, thrusters and noise are "
+            "not what the filter assumes): the chi-square bounds hold only for a filter whose model and noise "
+            "are the plant's (plant = \"observer\"); here they measure how far the filter's tuning is from "
+            "consistent on this plant")

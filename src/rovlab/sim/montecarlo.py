@@ -314,6 +314,9 @@ def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
                     "min": float(ok.min()), "p5": float(np.percentile(ok, 5)), "median": float(np.median(ok)),
                     "p95": float(np.percentile(ok, 95)), "max": float(ok.max())}
     out: dict[str, Any] = {"runs": len(runs), "seeds": [int(r["seed"]) for r in runs], "metrics": stats}
+    note = mx.consistency_note(str(runs[0]["metrics"].get("plant", ""))) if runs else None
+    if note:  # NEES/NIS outside their bounds on a plant that is not the filter's model is no fault
+        out["consistency_note"] = note
     nees = np.array([r["nees"] for r in runs], dtype=float)
     if nees.size:
         dof = int(runs[0]["metrics"]["nees"]["dof"])

@@ -17,6 +17,7 @@ from rovlab.io.logwriter import write_csv
 from rovlab.io.messages import order_columns
 from rovlab.io.report import write_figures, write_nees_figure, write_report_html
 from rovlab.io.timeseries import series_path, write_mcap
+from rovlab.sim.metrics import with_units
 from rovlab.sim.results import SimResult
 
 
@@ -63,7 +64,7 @@ def write_run(out_dir: str | Path, result: SimResult, metrics: Mapping[str, Any]
     words = result.status_words()  # sensor status as the words `rovlab filter` writes
     write_csv(out / "timeseries.csv", {k: words.get(k, v) for k, v in cols.items()}, exact=("time_s",))
     written["timeseries.csv"] = out / "timeseries.csv"
-    written["metrics.json"] = write_json(out / "metrics.json", metrics)
+    written["metrics.json"] = write_json(out / "metrics.json", with_units(metrics))
     if mcap:
         try:
             written["timeseries.mcap"] = write_mcap(out / "timeseries.mcap", cols, metadata={
@@ -95,7 +96,7 @@ def write_monte_carlo(out_dir: str | Path, scenario_name: str, summary: Mapping[
     """monte_carlo/metrics.json, and with ``figures`` the NEES over the runs (nees.png)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    written = {"metrics.json": write_json(out / "metrics.json", {"monte_carlo": summary})}
+    written = {"metrics.json": write_json(out / "metrics.json", with_units({"monte_carlo": summary}))}
     notes = notes if notes is not None else []
     figs = []
     if not figures:
@@ -107,7 +108,8 @@ def write_monte_carlo(out_dir: str | Path, scenario_name: str, summary: Mapping[
             asked = int(summary.get("runs_requested", len(runs)))
             count = f"{len(runs)} runs" if asked == len(runs) else f"the {len(runs)} finished of {asked} runs (interrupted)"
             figs.append(write_nees_figure(out / "nees.png", t, nees, summary["nees"]["bounds_per_step"], dof,
-                                          f"{scenario_name}: filter consistency over {count}"))
+                                          f"{scenario_name}: filter consistency over {count}",
+                                          note=summary.get("consistency_note")))
     except RuntimeError as exc:
         notes.append(str(exc))
     written.update({f.name: f for f in figs})
