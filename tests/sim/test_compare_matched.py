@@ -195,3 +195,16 @@ def test_heavy_payload_comparison_runs():
     f_only = comp["mrac-f-only"]["parameters"]
     assert f_only["M"]["final_mean"] == f_only["M"]["initial"]  # its M is not adapted
     assert "mrac-f-only: MRAC adapting only the net force F" in table(comp)
+
+
+def test_compare_command_runs_the_matched_lqg(tmp_path):
+    """`rovlab compare` runs the thesis LQG, the matched LQG and MRAC by default (issue 28, item 3)."""
+    import json
+
+    from rovlab.interfaces.cli import main
+
+    out = tmp_path / "cmp"
+    assert main(["compare", "heave-tether", "--runs", "1", "--no-figure", "--out", str(out)]) == 0
+    comp = json.loads((out / "comparison.json").read_text())
+    assert comp["controllers"] == ["lqg", "lqg-matched", "mrac"] and "lqg-matched" in comp["variants"]
+    assert main(["compare", "heave-tether", "--controllers", "lqg,nonsense", "--out", str(out)]) == 2

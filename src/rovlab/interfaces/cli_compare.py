@@ -14,8 +14,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     cmp = sub.add_parser("compare", help="run a scenario with several controllers from the same seeds "
                                          "(e.g. MRAC against LQG)")
     cmp.add_argument("scenario", help="packaged scenario name or TOML path (rovlab scenarios lists them)")
-    cmp.add_argument("--controllers", default="lqg,mrac",
-                     help="comma-separated controller names (default lqg,mrac)")
+    cmp.add_argument("--controllers", default="lqg,lqg-matched,mrac",
+                     help="comma-separated controller names or comparison variants: lqg-matched (the LQG as "
+                          "stiff as MRAC), mrac-f-only (MRAC adapting the net force only); default "
+                          "lqg,lqg-matched,mrac")
     cmp.add_argument("--runs", type=int, default=1, help="runs per controller (seeds seed .. seed+N-1)")
     cmp.add_argument("--seed", type=int, default=None, help="first seed (default: the scenario's)")
     cmp.add_argument("--out", default=None, help="output folder (default: out/compare-<scenario>)")
@@ -26,15 +28,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_comparison(scenario: str, controllers: list[str], runs: int, seed: int | None, out: Path | None, *,
                    figure: bool = True, quiet: bool = False) -> tuple[dict[str, Any], Path, list[str]]:
     """Run, write DIR/comparison.json, comparison.txt and comparison.png; returns (comparison, DIR, notes)."""
-    from rovlab.core.components import component_names
     from rovlab.interfaces.cli import UserError
-    from rovlab.sim.compare import compare, table
+    from rovlab.sim.compare import compare, component_of, controller_names, table
     from rovlab.sim.compare import figure as draw
     from rovlab.sim.montecarlo import Progress
     from rovlab.sim.output import write_json
     from rovlab.sim.scenario import load_scenario_data
 
-    known = component_names("controller")
+    known = controller_names()  # the controller components and rovlab.sim.compare's variants
     unknown = [c for c in controllers if c not in known]
     if not controllers or unknown:
         raise UserError(f"--controllers: unknown {', '.join(unknown) or '(none given)'}; expected a comma-separated "
@@ -50,7 +51,7 @@ def run_comparison(scenario: str, controllers: list[str], runs: int, seed: int |
     if not quiet:
         from rovlab.interfaces.compiling import announce_compile, loop_of
 
-        announce_compile([loop_of(data, file, controller=c) for c in controllers])
+        announce_compile([loop_of(data, file, controller=component_of(c)) for c in controllers])
     out = Path(out) if out is not None else Path("out") / f"compare-{name}"
     first = seed if seed is not None else int(data.get("seed", 0)) if isinstance(data.get("seed", 0), int) else 0
     seeds = list(range(first, first + runs))
