@@ -39,6 +39,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from rovlab.interfaces.hmi.documents import ParameterDocument
 from rovlab.interfaces.hmi.log import SessionLog, mcap_available
 from rovlab.interfaces.hmi.source import Message, SimulationSource, Source
@@ -321,13 +323,18 @@ class Session:
             raise CommandError("'set' needs 'key' and 'value', or 'changes'")
         doc = self.documents[target]
         try:
-            data, value = doc.candidate(changes)
-            self.source.apply(**{target: value})  # designs first; raises before anything changes
+            # a value the loader passes but the design cannot use (a variance of 1e-320, whose inverse
+            # overflows) raises FloatingPointError here instead of putting inf/NaN into the loop
+            with np.errstate(over="raise", invalid="raise", divide="raise"):
+                data, value = doc.candidate(changes)
+                self.source.apply(**{target: value})  # designs first; raises before anything changes
         except ConfigError as exc:
             raise CommandError(_refusal(target, exc), problems=exc.problems,
                                key=next(iter(changes))) from None
         except (ValueError, TypeError, ArithmeticError, KeyError) as exc:
-            raise CommandError(f"{target}: refused: {exc}", key=next(iter(changes))) from None
+            given = ", ".join(f"{k} = {_kind(v)}" for k, v in changes.items())
+            raise CommandError(f"{_WHAT[target]} unchanged: the design failed with {given} ({exc}); expected a "
+                               "value of a physically sensible size", key=next(iter(changes))) from None
         doc.commit(data, value)
         applied = {k: doc.get(k) for k in changes}
         self.log.event(self.source.time, "set", target=target, changes=_jsonable(applied))
@@ -547,9 +554,11 @@ def _target(c: dict) -> str:
     return target
 
 
+_WHAT = {"vehicle": "model vehicle", "truth": "plant truth", "config": "filter/controller configuration"}
+
+
 def _refusal(target: str, exc: ConfigError) -> str:
-    what = {"vehicle": "model vehicle", "truth": "plant truth", "config": "filter/controller configuration"}[target]
-    return f"{what} unchanged: " + ("; ".join(str(p) for p in exc.problems) or str(exc))
+    return f"{_WHAT[target]} unchanged: " + ("; ".join(str(p) for p in exc.problems) or str(exc))
 
 
 def _problem_value(p: Problem) -> Any:
