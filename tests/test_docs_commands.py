@@ -161,3 +161,27 @@ def test_synopsis_notation_is_read_as_a_reader_would():
     assert _words("rovlab filter LOG.csv [--config ...]") == ["filter", "LOG.csv", "--config", "VALUE"]
     assert _words("rovlab ros1 node|sim ...   # the same on ROS 1") == ["ros1", "node"]
     assert _words("rovlab mavlink sim --depth 1 &") == ["mavlink", "sim", "--depth", "1"]
+
+
+def test_readme_python_example_runs_with_the_hull_under_water():
+    """The README's Python example, as written: it placed the hull at z = 0, the free surface,
+    where half of it is out of the water (buoyancy and heave added mass halved) without saying so."""
+    from rovlab.params import load_vehicle
+
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    code = re.search(r"## Python\n\n```python\n(.*?)```", text, re.S).group(1)
+    scope: dict = {}
+    with contextlib.redirect_stdout(io.StringIO()):
+        exec(compile(code, "README.md (Python)", "exec"), scope)
+    v = load_vehicle("udrone")
+    assert scope["eta"][2] > v.geometry.height  # below the surface, with margin
+    assert scope["acc"][2] < 0 and v.buoyancy > v.weight  # what its comment says: it floats up
+
+
+def test_readme_vehicle_list_names_packaged_vehicles():
+    from rovlab.params.vehicle import packaged_vehicle_names
+
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    line = next(line for line in text.splitlines() if line.startswith("rovlab vehicle list"))
+    named = re.findall(r"[a-z][a-z0-9]*_?[a-z0-9_]*", line.split("(", 1)[1])
+    assert named and set(named) <= set(packaged_vehicle_names()), line
