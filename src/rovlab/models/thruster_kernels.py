@@ -14,9 +14,10 @@ import numpy as np
 K_KIND, K_NEUTRAL, K_DEAD, K_KLP, K_KNLP, K_KLN, K_KNLN, K_PMIN, K_PMAX = range(9)
 KIND_QUADRATIC, KIND_TABLE = 0.0, 1.0
 ZERO_FORCE = 1e-10  # |f| below this [N] is commanded as neutral (it lies in the dead band anyway)
+EDGE_FORCE = 2e-10  # [N]: the least force commanded on a side, i.e. that side's edge of the dead band
 
-KERNELS = ("_quad_force", "_quad_pwm", "_table_force", "_table_pwm", "bank_force_into", "bank_pwm_into", "bank_force",
-           "bank_pwm")
+KERNELS = ("_quad_force", "_quad_pwm", "_table_force", "_table_pwm", "_pwm", "bank_force_into", "bank_pwm_into",
+           "bank_pwm_hold_into", "bank_force", "bank_pwm")
 
 
 def _quad_force(row: np.ndarray, pwm: float) -> float:
@@ -69,6 +70,12 @@ def _table_pwm(row: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, f: flo
     return row[K_PMIN]
 
 
+def _pwm(row: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, f: float) -> float:
+    if row[K_KIND] == KIND_QUADRATIC:
+        return _quad_pwm(row, f)
+    return _table_pwm(row, grid_pwm, grid_f, f)
+
+
 def bank_force_into(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: np.ndarray,
                     out: np.ndarray) -> None:
     """Thrust of every thruster for a vector of PWM commands (saturated to their ranges) into out."""
@@ -83,10 +90,48 @@ def bank_pwm_into(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, fo
                   out: np.ndarray) -> None:
     """PWM command of every thruster for a vector of thrusts (saturated to their ranges) into out."""
     for i in range(rows.shape[0]):
-        if rows[i, K_KIND] == KIND_QUADRATIC:
-            out[i] = _quad_pwm(rows[i], force[i])
-        else:
-            out[i] = _table_pwm(rows[i], grid_pwm, grid_f[i], force[i])
+        out[i] = _pwm(rows[i], grid_pwm, grid_f[i], force[i])
+
+
+def bank_pwm_hold_into(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, force: np.ndarray,
+                       side: np.ndarray, sum_f: np.ndarray, hold_us: float, out: np.ndarray) -> None:
+    """PWM commands as :func:`bank_pwm_into`, with a hysteresis across the dead band.
+
+    The inverse jumps the dead band: the least force either way is commanded at its edge
+    (neutral +- d), so a demand that changes sign from sample to sample -- noise on a demand near
+    zero -- becomes a square wave of 2 d into the ESC. Here a thruster keeps the side of the dead
+    band it is on (``side[i]``: +1, -1, or 0 at neutral) until the demand for the other side,
+    summed since it last gave thrust on its own side (``sum_f[i]``, a one-sided cumulative sum:
+    noise about zero mostly cancels in it, a small steady demand grows it), needs at least
+    ``hold_us`` of PWM beyond that side's edge; until then it waits at the edge of its own side (no
+    thrust) and ``force[i]`` is set to 0, the thrust it gives, so the caller's achieved wrench says
+    so. A zero demand (|f| <= ZERO_FORCE) is neutral and clears the state. ``side`` and ``sum_f``
+    are updated in place. ``hold_us = 0`` is :func:`bank_pwm_into` exactly.
+    """
+    for i in range(rows.shape[0]):
+        f = force[i]
+        if abs(f) <= ZERO_FORCE:
+            out[i] = rows[i, K_NEUTRAL]
+            side[i] = 0.0
+            sum_f[i] = 0.0
+            continue
+        sign = 1.0 if f > 0.0 else -1.0
+        if side[i] == -sign and hold_us > 0.0:
+            acc = sum_f[i] + f  # the other side's demand since this side last gave thrust
+            edge = _pwm(rows[i], grid_pwm, grid_f[i], sign * EDGE_FORCE)  # the other side's edge
+            if abs(_pwm(rows[i], grid_pwm, grid_f[i], acc) - edge) < hold_us:
+                sum_f[i] = acc
+                out[i] = _pwm(rows[i], grid_pwm, grid_f[i], side[i] * EDGE_FORCE)  # wait at this side's edge
+                force[i] = 0.0
+                continue
+        elif side[i] == sign and hold_us > 0.0:
+            acc = sum_f[i] + f  # demand on this side repays what the other side asked for
+            sum_f[i] = min(acc, 0.0) if sign > 0.0 else max(acc, 0.0)
+            out[i] = _pwm(rows[i], grid_pwm, grid_f[i], f)
+            continue
+        side[i] = sign
+        sum_f[i] = 0.0
+        out[i] = _pwm(rows[i], grid_pwm, grid_f[i], f)
 
 
 def bank_force(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, pwm: np.ndarray) -> np.ndarray:

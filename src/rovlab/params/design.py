@@ -20,6 +20,8 @@ tables below, each estimator or controller may own a table named after it (``[mr
     sample_time = 0.1                      # h [s], filter and controller step
     estimator = "kf"                       # optional: the estimator component (default "kf")
     controller = "lqg"                     # optional: the controller component (default "lqg")
+    pwm_hysteresis_us = 20.0               # optional: the dead band's hysteresis in the PWM commands
+                                           # (0, the default: none; rovlab.sim.actuators)
 
     [model]                                # optional; absent keys come from the vehicle file
     source = "..."
@@ -203,6 +205,7 @@ class DesignConfig:
     controller: str = "lqg"  # the controller component
     tables: Mapping[str, Any] = field(default_factory=dict)  # the components' tables the file has, parsed
     thrust_uncertainty: float = 0.0  # relative sigma of the thrusters' wrench ([process_noise])
+    pwm_hysteresis_us: float = 0.0  # the dead band's hysteresis of the PWM commands [us] (rovlab.sim.actuators)
 
     def table(self, name: str) -> Any:
         """The component ``name``'s table ([mrac], [ekf], [dp], a plugin's [pd] ...) as parsed from
@@ -284,6 +287,8 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
                    what="filter and controller step in s")
     estimator = top.string("estimator", "kf")
     controller = top.string("controller", "lqg")
+    hysteresis = top.number("pwm_hysteresis_us", 0.0, nonnegative=True, hi=PWM_HYSTERESIS_MAX_US,
+                            what="PWM beyond the dead band in us, 0 = none")
     estimator_info = component("estimator", estimator) if estimator else None
     if estimator and estimator_info is None:
         top.problem("estimator", estimator, unknown_component("estimator", estimator))
@@ -393,10 +398,11 @@ def design_config_from_dict(data: Mapping[str, Any], *, file: str = "<dict>") ->
         bias_time_per_mass=per_mass, bias_time_constant=constants, measurements=tuple(measurements),
         initial_state=x0, initial_std=std, lqr_Q=Q, lqr_R=R, lqr_bryson=bryson,
         reference_gain=reference, sources=sources, file=file, estimator=estimator, controller=controller,
-        tables=tables, thrust_uncertainty=thrust_uncertainty,
+        tables=tables, thrust_uncertainty=thrust_uncertainty, pwm_hysteresis_us=hysteresis,
     )
 
 
+PWM_HYSTERESIS_MAX_US = 400.0  # half the T200/ESC command range (1100-1900 us): a wider one never changes side
 MAX_TABLE_MAGNITUDE = 1e6  # |value| of a component table's per-key number (SI units or the file's degrees)
 # Issue 28's fuzzing: [ekf] bias_psd = 2e298 overflowed the EKF's discretisation (LinAlgError in
 # simulate) and [dp] bandwidth = 1e300 gave NaN in the demanded wrench; at 1e6 every [ekf] noise

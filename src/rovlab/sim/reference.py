@@ -4,8 +4,8 @@ Slow (tens of milliseconds per simulated second) but short and readable: it is t
 tests compare the compiled loop against (noise-free, so both see the same inputs), and the
 "plain-Python loop" baseline of ``benchmarks/bench_closed_loop.py``. It supports the process
 and the observer plant, sensors at the control rate, the Kalman filter without sensor
-management (every present sample is used: a standard stacked Joseph update), the LQG law and
-the saturation-aware allocation.
+management (every present sample is used: a standard stacked Joseph update), the LQG law,
+the saturation-aware allocation and the PWM commands with the dead band's hysteresis.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import numpy as np
 
 from rovlab.core.angles import wrap_angle as _wrap
 from rovlab.models import kinetics as kin
+from rovlab.models import thruster_kernels as tk
 from rovlab.sim.plant import ObserverPlant
 from rovlab.sim.prepare import Prepared
 
@@ -42,6 +43,7 @@ def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) 
     offsets = np.array([c.offset for c in fm.channels])
     angle = np.array([c.angle for c in fm.channels])
     logs: dict[str, list[np.ndarray]] = {k: [] for k in ("true", "x", "P", "u", "pwm", "y")}
+    side, sum_f = np.zeros(len(bank.names)), np.zeros(len(bank.names))  # the thrusters' dead-band state
     for k in range(n):
         truth = np.array([xo[0], _wrap(xo[1]), xo[2], xo[3]]) if observer else \
             np.array([xp[2], _wrap(xp[3]), xp[6], xp[7]])
@@ -72,7 +74,8 @@ def run_python(prep: Prepared, *, noise: bool = True, steps: int | None = None) 
         u = ctl.P @ np.array([z_ref, psi_ref]) - ctl.K @ np.array([x[0], psi_hat, x[2], x[3]]) - x[4:6]
         # allocation, PWM (quantised), real thrust
         f, _ = alloc.forces(np.array([0.0, 0.0, u[0], 0.0, 0.0, u[1]]))
-        pwm = bank.pwm(f)
+        pwm = np.empty(len(bank.names))
+        tk.bank_pwm_hold_into(bank.rows, bank.grid_pwm, bank.grid_force, f, side, sum_f, prep.actuators.hold_us, pwm)
         res = prep.actuators.pwm_res
         if res > 0:
             pwm = res * np.round(pwm / res)

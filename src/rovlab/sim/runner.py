@@ -13,6 +13,7 @@ from typing import Any
 from rovlab.core.components import (
     fresh,
 )
+from rovlab.sim.actuators import fresh_actuators
 from rovlab.sim.compile import note_cached, record
 from rovlab.sim.loop import Drive, Logs, explain_allocation, loop_for, new_logs, new_work, run_loop
 from rovlab.sim.prepare import Prepared, first_rows, prepare
@@ -33,8 +34,8 @@ class PlantDiverged(RuntimeError):
 class Simulation:
     """The components of one run, advanced chunk by chunk through the compiled loop.
 
-    Holds its own copies of the plant's, the estimator's and the controller's state, so a
-    Prepared can be run many times. ``advance(drive)`` runs len(drive.refs) control steps.
+    Holds its own copies of the plant's, the estimator's, the controller's and the actuators'
+    state, so a Prepared can be run many times. ``advance(drive)`` runs len(drive.refs) control steps.
     """
 
     def __init__(self, prep: Prepared) -> None:
@@ -42,6 +43,7 @@ class Simulation:
         self.plant = fresh(prep.plant)
         self.estimator = fresh(prep.design.estimator.kernel)
         self.controller = fresh(prep.design.controller.kernel)
+        self.actuators = fresh_actuators(prep.actuators)  # the thrusters' dead-band side: the run's own
         self.work = new_work(len(prep.channels), prep.nees_idx.shape[0], prep.actuators.rows.shape[0])
         self.k = 0
 
@@ -56,7 +58,7 @@ class Simulation:
         drive = prep.drive if drive is None else drive
         logs = new_logs(drive.refs.shape[0], len(prep.channels), self.estimator.x.shape[0],
                         prep.actuators.rows.shape[0], self.controller.state.shape[0])
-        return (self.plant, prep.sensors, self.estimator, self.controller, prep.actuators, prep.nav_of,
+        return (self.plant, prep.sensors, self.estimator, self.controller, self.actuators, prep.nav_of,
                 prep.nees_idx, drive, logs, self.work)
 
     def advance(self, drive: Drive) -> Logs:
