@@ -7,6 +7,7 @@ import argparse
 import errno
 import gc
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -92,7 +93,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"rovlab {args.command}: interrupted", file=sys.stderr)
         return 130
-    except OSError as exc:
+    except BrokenPipeError:  # the reader went away (rovlab ... | head): nothing more to say
+        if command_line:  # and nothing at exit either: Python's flush of stdout would fail again
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except OSError as exc:  # (after BrokenPipeError, an OSError too)
         if exc.errno not in _FILESYSTEM_REFUSALS:
             raise
         # a write the commands do not catch themselves: the disk or the file system said no
@@ -100,8 +105,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         what = str(exc.filename) if exc.filename else "its output"
         print(f"rovlab {args.command}: error: cannot write {what}: {exc.strerror or exc}", file=sys.stderr)
         return 2
-    except BrokenPipeError:
-        return 0
     finally:
         if command_line:
             # The process ends now: move what it made (numba's ~100 000 objects) out of the garbage
