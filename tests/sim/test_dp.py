@@ -281,7 +281,8 @@ def test_bluerov2_heavy_dp_designs_on_stock_sensors_and_runs():
     cfg = load_design_config("bluerov2_heavy_dp")
     est, ctl = build_pair(vehicle, cfg)
     assert set(est.model.dead_reckoned) == {"x", "y", "u", "v", "b_X", "b_Y"}
-    m = _run("bluerov2-heavy-dp")
+    # the packaged scenario has the DVL now (tests/sim/test_bluerov2_heavy_dvl.py): run it on the stock sensors
+    m = _run("bluerov2-heavy-dp", vehicle="bluerov2_heavy", design="bluerov2_heavy_dp", dropout=[])
     assert m["tracking_rms"]["z"] < 0.1 and m["tracking_rms"]["psi"] < math.radians(3.0), m["tracking_rms"]
     assert abs(m["setpoint_error_final"]["z"]) < 0.05
     # without dead_reckoning the same sensors are refused, naming the horizontal states
