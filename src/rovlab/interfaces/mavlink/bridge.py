@@ -425,6 +425,8 @@ class MavlinkBridge:
         self.counts["implausible_depth"] += 1
         hint = " (ArduSub SITL: start it with --home at altitude 0)" if isinstance(press, (int, float)) and press < 0 \
             else ""
+        if isinstance(press, (int, float)) and math.isfinite(press):  # the depth it would mean, for the message
+            depth = (press - self.smap.surface_hpa) * 100.0 / (v.water_density * v.gravity)
         self._last_implausible = (f"SCALED_PRESSURE2 press_abs = {press!r} hPa is implausible: depth "
                                   f"{depth:.1f} m with surface {self.smap.surface_hpa:.2f} hPa, expected {lo:g} .. "
                                   f"{hi:g} m{hint}; its samples are rejected")
