@@ -419,7 +419,6 @@
   // fields the user typed into and has not sent yet: the live refresh leaves them alone, and Set
   // sends every one of them (not only the one that had the focus)
   const refEdited = new Set();
-  hmi.refEdited = refEdited;
   // the running controller holds a north/east position (the source says which references it follows)
   function positionControl() {
     const refs = (hmi.source && hmi.source.references) || [];
@@ -468,7 +467,7 @@
       if (raw === "") continue;
       const v = Number(raw);
       args[key] = isFinite(v) ? v : raw; // the server explains what is wrong with text or infinity
-      sent.push(id);
+      sent.push([id, $(id).value]);
     }
     const m = $("ref-msg");
     m.classList.remove("okmsg");
@@ -478,7 +477,8 @@
     }
     send("reference", args).then(() => {
       m.textContent = "";
-      for (const id of sent) {
+      for (const [id, typed] of sent) {
+        if ($(id).value !== typed) continue; // typed into again while the command was on its way: still edited
         refEdited.delete(id);
         $(id).classList.remove("bad", "edited");
         if (document.activeElement === $(id)) $(id).blur(); // the state frame that follows shows the loop's value
