@@ -135,6 +135,10 @@ def test_not_engaged_until_a_reference_neutral_thrusters(core):
         core.set_reference(z=-1.0)
     with pytest.raises(ValueError, match="finite"):
         core.set_reference(psi=float("nan"))
+    with pytest.raises(ValueError, match="two turns"):  # 1e308 rad used to wrap to an arbitrary heading
+        core.set_reference(psi=1e308)
+    core.set_reference(psi=math.radians(370.0))  # a full turn and a bit: wrapped
+    assert core.reference[3] == pytest.approx(math.radians(10.0))
     assert core.reference[2] == 1.0
 
 

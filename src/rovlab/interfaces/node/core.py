@@ -91,6 +91,7 @@ from rovlab.params.vehicle import Vehicle
 from rovlab.sim.actuators import make_actuators
 from rovlab.sim.designs import Design, make_design
 
+MAX_HEADING_RAD = 4.0 * math.pi  # |psi| of a set-point: two turns either way (the HMI's +-720 deg)
 SAMPLE_RESULTS = ("accepted", "late", "out-of-order", "unused", "disabled", "future", "invalid")
 _MODES = {"auto": MODE_AUTO, "off": MODE_OFF, "on": MODE_ON}
 _COMPILED: set[tuple[type, ...]] = set()  # component types whose step this process has compiled
@@ -282,7 +283,8 @@ class NodeCore:
     def set_reference(self, *, z: float | None = None, psi: float | None = None, x: float | None = None,
                       y: float | None = None) -> None:
         """New set-point (NED: depth z [m] >= 0, heading psi [rad]); engages the controller.
-        ValueError (nothing changes) for a value that is not finite or a negative depth."""
+        ValueError (nothing changes) for a value that is not finite, a negative depth or a heading
+        beyond two turns (+-4 pi rad; within them it is wrapped to (-pi, pi])."""
         new = self.reference.copy()
         for i, (name, v) in enumerate((("x", x), ("y", y), ("z", z), ("psi", psi))):
             if v is None:
@@ -292,6 +294,9 @@ class NodeCore:
             new[i] = float(v)
         if z is not None and new[2] < 0.0:
             raise ValueError(f"reference depth z must be >= 0 m (the free surface is z = 0), got {z!r}")
+        if psi is not None and abs(new[3]) > MAX_HEADING_RAD:  # as the HMI: wrapping 1e308 would hide a slip
+            raise ValueError(f"reference heading psi must be within +-{MAX_HEADING_RAD:.4g} rad (two turns; a "
+                             f"larger value is a slip or another unit, e.g. degrees or centidegrees), got {psi!r}")
         if psi is not None:
             new[3] = math.remainder(new[3], 2.0 * math.pi)
         with self._lock:

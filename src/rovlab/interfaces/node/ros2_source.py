@@ -127,6 +127,7 @@ class Ros2Source:
                           "offset": c.offset} for c in est.channels],
             "sensors": list(self.sensors), "thrusters": list(self.design.allocator.bank.names),
             "controller": self.config.controller, "controller_states": list(self.design.controller.state_names),
+            "references": ["z", "psi"],  # this source sends depth and heading set-points only
         }
 
     def status(self) -> dict[str, Any]:
