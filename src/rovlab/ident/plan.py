@@ -12,8 +12,8 @@ logged (PWM), so the identification sees the wrench that was really commanded, w
 guard and the depth law added.
 
 The excitation is a random multi-level sequence (Ljung 1999, sec. 13.3; a PRBS with levels):
-holds of 0.5-3 s (reversals excite the added mass, holds the damping), levels from 20 % to 100 %
-of an amplitude that reaches ``heave_speed`` / ``yaw_rate`` at steady state according to the
+holds of 0.5-3 s (reversals excite the added mass, holds the damping), levels log-uniform from
+5 % to 100 % of an amplitude that reaches ``heave_speed`` / ``yaw_rate`` at steady state according to the
 vehicle file's damping (two speeds apart separate linear from quadratic damping), capped at 80 %
 of what the allocation can give in that DOF alone (``dof_capacity``). Heave holds are cut short
 where the vehicle file's model predicts that the depth would leave the middle 70 % of the band,
@@ -127,6 +127,16 @@ def _damping_force(vehicle: Vehicle, i: int, v: float) -> float:
                + float(vehicle.damping_cubic[i]) * v**3)
 
 
+LEVEL_RANGE = (0.05, 1.0)  # share of the amplitude, log-uniform: as many holds at 5-10 % as at 50-100 %
+
+
+def _level(rng: np.random.Generator) -> float:
+    """A level's share of the amplitude, log-uniform over LEVEL_RANGE: low levels (slow speeds,
+    where the linear damping shows) as often as high ones (where the quadratic damping shows)."""
+    lo, hi = LEVEL_RANGE
+    return float(lo * (hi / lo) ** rng.uniform())
+
+
 def plan_dive(vehicle: Vehicle, dofs: Sequence[str] = PLAN_DOFS, duration_s: float = 300.0, *, seed: int = 0,
               depth_min: float = 1.0, depth_max: float = 3.0, dt: float = 0.1, heave_speed: float = 0.4,
               yaw_rate: float = 1.0, hold_s: tuple[float, float] = (0.5, 3.0), rest_every_s: float = 40.0,
@@ -183,7 +193,7 @@ def plan_dive(vehicle: Vehicle, dofs: Sequence[str] = PLAN_DOFS, duration_s: flo
         k = 0
         while k < n:
             m = int(round(rng.uniform(*hold_s) / dt))
-            N[k:k + m] = rng.choice((-1.0, 1.0)) * amp["yaw"] * rng.uniform(0.2, 1.0)
+            N[k:k + m] = rng.choice((-1.0, 1.0)) * amp["yaw"] * _level(rng)
             k += max(m, 1)
         N[rest] = 0.0
     if "heave" in dofs:
@@ -196,7 +206,7 @@ def plan_dive(vehicle: Vehicle, dofs: Sequence[str] = PLAN_DOFS, duration_s: flo
             sign = rng.choice((-1.0, 1.0))
             if abs(z - mid) > band / 6:
                 sign = -1.0 if z > mid else 1.0  # towards the middle (z down: a positive Z goes deeper)
-            level = sign * amp["heave"] * rng.uniform(0.2, 1.0)
+            level = sign * amp["heave"] * _level(rng)
             for j in range(k, min(k + m, n)):
                 if rest[j]:
                     level_j = 0.0

@@ -930,7 +930,7 @@ def _dive_text(fit, vehicle: str) -> str:
     a, b = fit.ident_span
     lines = [f"heave and yaw from {fit.file} (vehicle {vehicle}): identification {a:.1f}-{b:.1f} s, validation "
              f"{fit.valid_span[0]:.1f}-{fit.valid_span[1]:.1f} s; output error; standard deviations robust to "
-             "correlated errors (Newey-West, per window)"]
+             "correlated errors (Newey-West; clustered by window)"]
     lines += [f"  {n}" for n in fit.notes]
     for dof, f in fit.fits.items():
         if f.refused_dof:
