@@ -148,6 +148,18 @@ def test_observer_plant_and_dp_designs_have_none():
     assert prepare(load_scenario("dp-station-keeping")).actuators.hold_us == 0.0
 
 
+def test_a_vehicle_node_commands_what_the_simulator_does():
+    """The node builds its actuators from the design (rovlab.interfaces.node.core): the design's
+    allocator carries the hysteresis, so the node's PWM is the simulator's
+    (tests/interfaces/test_node_core.py compares them sample by sample on the dropout scenario)."""
+    from rovlab.interfaces.node.core import NodeCore
+
+    core = NodeCore(load_vehicle("udrone"), load_design_config("thesis"), log=lambda msg: None)
+    assert core.actuators.hold_us == 20.0
+    core = NodeCore(load_vehicle("udrone_dvl"), load_design_config("udrone_dp"), log=lambda msg: None)
+    assert core.actuators.hold_us == 0.0
+
+
 @pytest.mark.parametrize("value", [-1.0, 1e6, "20"])
 def test_bad_hysteresis_is_refused_with_the_key(value):
     data = read_toml(load_design_config("thesis").file)

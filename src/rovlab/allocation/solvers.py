@@ -88,11 +88,15 @@ class Allocator:
     wrench then differs from ``achieved``, which is what the unconstrained forces would give).
     ``compiled=False`` runs the kernels as plain Python: the same numbers, slower per call, but
     without importing numba or compiling (for a one-off allocation such as ``rovlab allocate``).
+    ``pwm_hysteresis_us``: the dead band's hysteresis the PWM commands of a closed loop get from a
+    design file (rovlab.sim.actuators, which keeps its state); ``allocate`` is one-off and ignores it.
     """
 
     def __init__(self, vehicle: Vehicle, *, priority: Sequence[Sequence[str]] = DEFAULT_PRIORITY,
-                 weights: np.ndarray | None = None, saturation: bool = True, compiled: bool = True) -> None:
+                 weights: np.ndarray | None = None, saturation: bool = True, compiled: bool = True,
+                 pwm_hysteresis_us: float = 0.0) -> None:
         self.vehicle = vehicle
+        self.pwm_hysteresis_us = float(pwm_hysteresis_us)
         self.B = np.ascontiguousarray(configuration_matrix(vehicle))
         self.T = np.ascontiguousarray(weighted_pinv(self.B, weights))
         n = self.B.shape[1]

@@ -53,13 +53,16 @@ class Actuators(NamedTuple):
 
 
 def make_actuators(allocator: Allocator, bank: ThrusterBank, B_true: np.ndarray, pwm_res: float, *,
-                   real: bool = True, hold_us: float = 0.0) -> Actuators:
+                   real: bool = True, hold_us: float | None = None) -> Actuators:
     """The actuators of a run. ``real=False`` skips the thrust the PWM commands really give
     (tau_real is then the achieved wrench) where nothing feels it: the observer plant takes the
     achieved wrench (rovlab.sim.runner). The vehicle node keeps the default: it reports tau_real
-    (rovlab.sim.step.control_step). ``hold_us``: the dead band's hysteresis (0: the plain inverse).
-    Every thruster starts at neutral; :func:`fresh_actuators` gives a run its own copy."""
+    (rovlab.sim.step.control_step). ``hold_us``: the dead band's hysteresis (0: the plain inverse;
+    default: the design's, ``allocator.pwm_hysteresis_us``, so a vehicle node commands what the
+    simulator does). Every thruster starts at neutral; :func:`fresh_actuators` gives a run its own copy."""
     n = bank.rows.shape[0]
+    if hold_us is None:
+        hold_us = allocator.pwm_hysteresis_us
     return Actuators(allocator.B, allocator.T, allocator._s, allocator.f_min, allocator.f_max, allocator.level,
                      int(allocator.n_levels), np.ascontiguousarray(B_true, dtype=float), bank.rows, bank.grid_pwm,
                      bank.grid_force, float(pwm_res), np.zeros(6),

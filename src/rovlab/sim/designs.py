@@ -48,7 +48,7 @@ def make_design(vehicle: Vehicle, config: DesignConfig, *, plant: str, plant_ste
     est, ctl = build_pair(vehicle, config, estimator=estimator, controller=controller, file=file)
     est_info = component("estimator", estimator or config.estimator)
     ctl_info = component("controller", controller or config.controller)
-    alloc = Allocator(vehicle)
+    alloc = Allocator(vehicle, pwm_hysteresis_us=config.pwm_hysteresis_us)  # the closed loop's PWM commands
     where = config.file or config.name
     for info, spec in ((est_info, est), (ctl_info, ctl)):
         if info is not None and info.check is not None:

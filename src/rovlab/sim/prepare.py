@@ -132,7 +132,7 @@ def prepare(data: Mapping[str, Any] | Scenario, *, file: str = "<dict>", seed: i
     B_true = alloc.B if same else Allocator(truth).B
     # the dead band's hysteresis protects real ESCs: the observer plant (the thesis's perfect model) has none
     actuators = make_actuators(alloc, bank, B_true, sc.pwm_resolution_us, real=sc.plant == "process",
-                               hold_us=config.pwm_hysteresis_us if sc.plant == "process" else 0.0)
+                               hold_us=None if sc.plant == "process" else 0.0)
     nav_of = np.array([TRUTH_INDEX[q] for q in est.nav], dtype=np.int64)
     nees = [i for i, q in enumerate(est.nav) if sc.plant == "observer" or not q.startswith("b_")]
     return Prepared(sc, vehicle, truth, config, design, plant, sensors, actuators, drive, n_ctrl, h, nav_of,
