@@ -203,9 +203,9 @@ def test_a_stale_stamp_removes_rovlabs_cache_files_and_nothing_else(tmp_path, mo
 
 # Modules that kernel modules import from but numba never compiles (design code, file readers, the
 # design summaries, the decorator itself): their edits cannot change a compiled kernel.
-PYTHON_ONLY = {"_jit.py", "allocation/geometry.py", "control/lqr.py", "estimation/filtering.py", "estimation/model.py",
-               "estimation/streaming.py", "models/discretise.py", "params/design.py", "params/validate.py",
-               "params/vehicle.py", "core/summary.py"}
+PYTHON_ONLY = {"_jit.py", "allocation/capacity.py", "allocation/geometry.py", "control/lqr.py",
+               "estimation/filtering.py", "estimation/model.py", "estimation/streaming.py", "models/discretise.py",
+               "params/design.py", "params/validate.py", "params/vehicle.py", "core/summary.py", "core/units.py"}
 
 
 def test_what_kernels_are_compiled_from_is_in_the_cache_key():

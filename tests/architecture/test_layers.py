@@ -1,8 +1,10 @@
 """The layout tells the architecture (STYLE.md): dependencies point downward only.
 
-    interfaces -> sim -> {control, estimation, allocation, ident} -> models -> io -> params -> core
+    interfaces -> sim -> {control, estimation, ident} -> allocation -> models -> io -> params -> core
 
-The four middle siblings do not import each other (io may read params' errors, never the other
+The three middle siblings do not import each other; the allocation (what the thrusters can give)
+sits below them, so a controller that bounds its integral by the thrust capacity and a planner
+that sizes an excitation to it ask the allocation itself instead of solving it again (io may read params' errors, never the other
 way round; core, the shared helpers, imports no other rovlab package). Relative imports count
 like absolute ones. Heavy or optional packages (plotting, web server, browser automation, MCAP,
 Dask) are imported only at the edges.
@@ -16,9 +18,9 @@ from pathlib import Path
 import rovlab
 
 ROOT = Path(rovlab.__file__).parent
-LAYER = {"core": 0, "params": 1, "io": 2, "models": 3, "allocation": 4, "estimation": 4, "control": 4,
-         "ident": 4, "sim": 5, "interfaces": 6}
-SIBLINGS = {"allocation", "estimation", "control", "ident"}
+LAYER = {"core": 0, "params": 1, "io": 2, "models": 3, "allocation": 4, "estimation": 5, "control": 5,
+         "ident": 5, "sim": 6, "interfaces": 7}
+SIBLINGS = {"estimation", "control", "ident"}
 EDGE_ONLY = {"matplotlib", "aiohttp", "playwright", "mcap", "dask", "distributed", "pymavlink"}
 EDGE_PACKAGES = {"interfaces", "io"}  # plus ident/plots.py and io/report.py, which import lazily
 

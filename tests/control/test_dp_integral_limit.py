@@ -4,7 +4,7 @@ Under a current the thrusters cannot hold the position error grows without end, 
 integral of the back-calculation (Astrom & Hagglund 2006, Advanced PID Control, sec. 3.5), which
 settles at e (k_t K_p / K_i - 1) / k_t only for a constant error: the reproducer's integral was
 -154 m s after 60 s and falling. The DP law now clamps it so that its force K_i int stays within
-what the thrusters give along the axis (rovlab.control.dp.thrust_capacity).
+what the thrusters give along the axis (rovlab.allocation.capacity.thrust_capacity).
 """
 
 from __future__ import annotations

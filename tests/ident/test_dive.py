@@ -213,7 +213,9 @@ def test_a_plan_file_with_an_unknown_key_is_refused(capsys, tmp_path, heavy):
 def test_the_real_surface_log_determines_nothing_and_says_why(heavy):
     """small.tlog (ArduSub 4.1, BlueROV2 Heavy at the surface or on deck, 263 s): no heave or yaw
     manoeuvre, so both DOFs are refused, naming the plan that would determine them."""
-    data = dive.read_dive(TLOG, heavy)
+    from rovlab.interfaces.cli_ident import read_dive_log
+
+    data = read_dive_log(TLOG, heavy)
     fit = dive.identify_dive(data, heavy)
     for dof in ("heave", "yaw"):
         assert fit.fits[dof].refused_dof and f"--dofs {dof}" in fit.fits[dof].refused_dof

@@ -77,6 +77,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from rovlab._jit import WITHOUT_NRT, njit
+from rovlab.allocation.capacity import thrust_capacity
 from rovlab.core.angles import wrap_angle
 from rovlab.core.components import (
     NAV_BN,
@@ -99,7 +100,6 @@ from rovlab.core.components import (
     register_controller,
 )
 from rovlab.models import kinetics as kin
-from rovlab.models.thrusters import ThrusterBank
 from rovlab.params.design import DesignConfig, per_key
 from rovlab.params.validate import ConfigError, Problem, TableReader
 from rovlab.params.vehicle import Vehicle
@@ -294,31 +294,6 @@ class DPDesign:
             hi = np.where(self.Ki > 0.0, up / self.Ki, np.inf)
             lo = np.where(self.Ki > 0.0, -down / self.Ki, -np.inf)
         return lo, hi
-
-
-def thrust_capacity(vehicle: Vehicle) -> tuple[np.ndarray, np.ndarray]:
-    """(most negative, most positive) force or moment per DOF X, Y, Z, N [N, N m] that the
-    thrusters give in that DOF alone, every other DOF (roll and pitch included) at zero: what the
-    saturation-aware allocation answers to a pure demand (rovlab.allocation.Allocator; control does
-    not import allocation, so the same small linear program is solved here:
-    tests/control/test_dp_integral_limit.py compares the two)."""
-    from scipy.optimize import linprog
-
-    r = np.array([th.position for th in vehicle.thrusters], dtype=float).reshape(-1, 3)
-    e = np.array([th.direction for th in vehicle.thrusters], dtype=float).reshape(-1, 3)
-    B = np.vstack([e.T, np.cross(r, e).T])  # 6 x n, rows X, Y, Z, K, M, N (Fossen 2011, sec. 12.3)
-    bank = ThrusterBank.from_vehicle(vehicle)
-    n = B.shape[1]
-    lo, hi = np.zeros(4), np.zeros(4)
-    for k, row in enumerate((0, 1, 2, 5)):
-        A = np.hstack([B, -np.eye(6)[:, [row]]])  # B f - t e_row = 0
-        bounds = [(float(a), float(b)) for a, b in zip(bank.f_min, bank.f_max)] + [(None, None)]
-        for sign, out in ((1.0, hi), (-1.0, lo)):
-            cost = np.zeros(n + 1)
-            cost[-1] = -sign  # maximise sign * t
-            res = linprog(cost, A_eq=A, b_eq=np.zeros(6), bounds=bounds, method="highs")
-            out[k] = float(res.x[-1]) if res.status == 0 else 0.0
-    return lo, hi
 
 
 def known_current(config: DesignConfig) -> np.ndarray:

@@ -196,7 +196,7 @@ class DiveData:
         return float(min(t[0] for t in ts)), float(max(t[-1] for t in ts))
 
 
-def _sensor_channels(vehicle: Vehicle) -> dict[str, tuple[str, str, str, float, float]]:
+def sensor_channels(vehicle: Vehicle) -> dict[str, tuple[str, str, str, float, float]]:
     """Which sensor gives depth, heading and yaw rate: key -> (column, sensor, channel, variance,
     resolution). Depth: a pressure sensor; heading and yaw rate: an IMU/AHRS, else motion capture."""
     out: dict[str, tuple[str, str, str, float, float]] = {}
@@ -249,7 +249,7 @@ def dive_from_columns(cols: Mapping[str, np.ndarray], vehicle: Vehicle, *, file:
                                   f"{vehicle.name} (missing {', '.join(missing)}) or the columns tau_Z and tau_N")
     if t_cmd.size == 0:
         raise IdentificationError(f"{file}: no row with the thruster input; expected PWM or tau_Z/tau_N values")
-    sens = _sensor_channels(vehicle)
+    sens = sensor_channels(vehicle)
     chans: list[Channel] = []
     for key, dof, kind in (("depth", "heave", "position"), ("heading", "yaw", "position"), ("rate", "yaw", "velocity")):
         if key not in sens:
@@ -270,27 +270,12 @@ def dive_from_columns(cols: Mapping[str, np.ndarray], vehicle: Vehicle, *, file:
 
 
 def read_dive(path: str | Path, vehicle: Vehicle) -> DiveData:
-    """A dive from a CSV log (:func:`dive_from_columns`) or a .tlog / .BIN / .mcap MAVLink log
-    (rovlab.interfaces.mavlink.logs: SERVO_OUTPUT_RAW through the thrust curves, SCALED_PRESSURE2
-    depth, ATTITUDE heading and yaw rate)."""
-    path = Path(path)
-    if path.suffix.lower() in (".tlog", ".bin", ".mcap"):
-        from types import SimpleNamespace
-
-        from rovlab.interfaces.mavlink.logs import filter_columns, read_records, stamp_outliers
-
-        records = read_records(path)
-        drop = set(stamp_outliers([r[0] for r in records], 100.0))
-        records = [r for i, r in enumerate(records) if i not in drop]
-        sens = _sensor_channels(vehicle)
-        kinds = {"depth": "pressure", "heading": "imu", "rate": "imu"}
-        chans = tuple(SimpleNamespace(column=v[0], kind=kinds[k] if k != "heading" or v[0].startswith("psi_") else "imu",
-                                      quantity=v[2]) for k, v in sens.items())
-        cols = filter_columns(records, vehicle, chans, 0.1, file=str(path))
-        return dive_from_columns(cols, vehicle, file=str(path))
+    """A dive from a CSV log (:func:`dive_from_columns`). A .tlog / .BIN / .mcap MAVLink log is read
+    at the interface layer (rovlab.interfaces.cli_ident.read_dive_log: the MAVLink log readers
+    give the same columns)."""
     from rovlab.io.logreader import read_log
 
-    log = read_log(path)
+    log = read_log(Path(path))
     return dive_from_columns(dict(log.data), vehicle, file=str(path))
 
 
@@ -984,7 +969,7 @@ def fly_plan(plan: Any, model: Vehicle, truth: Vehicle, *, seed: int | None = 0,
     bank_true = ThrusterBank.from_vehicle(truth)
     B_true = configuration_matrix(truth)
     p = pack(truth)
-    sens = _sensor_channels(model)
+    sens = sensor_channels(model)
     if "depth" not in sens:
         raise ValueError(f"vehicle {model.name!r} has no pressure sensor: a dive needs depth")
     dt = float(plan.dt)

@@ -255,7 +255,7 @@ def expected_sigmas(vehicle: Vehicle, plan: DivePlan, *, split: float = 0.7,
     free = tuple(free or dive.DEFAULT_FREE)
     flight = dive.fly_plan(plan, vehicle, vehicle, noise=False)
     data = dive.dive_from_columns(flight.columns, vehicle, file="<nominal flight>")
-    sens = dive._sensor_channels(vehicle)
+    sens = dive.sensor_channels(vehicle)
     phi = math.exp(-0.05 / dive.AHRS_TAU_S)
     inflate = {}
     for key in ("heading",):

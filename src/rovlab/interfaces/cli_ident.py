@@ -899,7 +899,7 @@ def _cmd_dive(args: argparse.Namespace) -> int:
     v = load_vehicle(args.vehicle)
     target = _check_update_target(args.update) if args.update else None
     try:
-        data = _run(args.file, lambda: dive.read_dive(args.file, v))
+        data = _run(args.file, lambda: read_dive_log(args.file, v))
     except (ValueError, RuntimeError) as exc:  # rovlab.interfaces.mavlink.logs.LogError, a missing pymavlink
         raise _user_error(str(exc)) from None
     fit = _run(args.file, lambda: dive.identify_dive(data, v, dofs=dofs, free=free, split=args.split))
@@ -965,3 +965,26 @@ def _dive_text(fit, vehicle: str) -> str:
                             for i in range(len(HORIZONS)))
             lines.append(f"  {out.split('_')[0] + ' [' + unit + ']':12s}{cells}")
     return "\n".join(lines)
+
+
+def read_dive_log(path: str | Path, vehicle: Any) -> Any:
+    """A dive (rovlab.ident.dive.DiveData) from a CSV log, or from a .tlog / .BIN / .mcap MAVLink
+    log through the MAVLink log readers (SERVO_OUTPUT_RAW through the thrust curves,
+    SCALED_PRESSURE2 depth, ATTITUDE heading and yaw rate), the same columns as a CSV's."""
+    from rovlab.ident import dive
+
+    path = Path(path)
+    if path.suffix.lower() not in (".tlog", ".bin", ".mcap"):
+        return dive.read_dive(path, vehicle)
+    from types import SimpleNamespace
+
+    from rovlab.interfaces.mavlink.logs import filter_columns, read_records, stamp_outliers
+
+    records = read_records(path)
+    drop = set(stamp_outliers([r[0] for r in records], 100.0))
+    records = [r for i, r in enumerate(records) if i not in drop]
+    kinds = {"depth": "pressure", "heading": "imu", "rate": "imu"}
+    chans = tuple(SimpleNamespace(column=v[0], kind=kinds[k], quantity=v[2])
+                  for k, v in dive.sensor_channels(vehicle).items())
+    cols = filter_columns(records, vehicle, chans, 0.1, file=str(path))
+    return dive.dive_from_columns(cols, vehicle, file=str(path))
