@@ -167,3 +167,16 @@ def test_a_vehicle_file_that_disagrees_with_the_vehicles_parameters_stops_the_br
         bridge.stop()
         thread.join(10.0)
         stop(sim)
+
+
+def test_the_status_line_says_no_telemetry_instead_of_a_predicted_depth(capsys):
+    """Issue 28: with no telemetry at all the status line printed z = 2.000 m, the filter's own
+    prediction; it now says that nothing came (and the bridge controls nothing)."""
+    from rovlab.interfaces.cli import main
+
+    port = free_udp_port()
+    assert main(["mavlink", "bridge", "--connect", f"udpin:127.0.0.1:{port}", "--duration", "2.5",
+                 "--status-every", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "no telemetry from the vehicle (none received yet): no estimate, no control" in out
+    assert "z=" not in out

@@ -333,9 +333,15 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
     next_print = time.monotonic() + args.status_every if args.status_every > 0 else math.inf
     while thread.is_alive():
         thread.join(0.2)
-        if time.monotonic() >= next_print and bridge.core.last is not None:
+        if time.monotonic() >= next_print:
             next_print += args.status_every
             o = bridge.core.last
+            if o is None or bridge.telemetry_lost(time.monotonic()):  # no estimate to show, only a prediction
+                seen = bridge.last_telemetry
+                since = "none received yet" if seen is None else f"none for {time.monotonic() - seen:.0f} s"
+                print(f"no telemetry from the vehicle ({since}): no estimate, no control, "
+                      f"{'armed' if bridge.armed else 'disarmed'}", flush=True)
+                continue
             predicted = " (PREDICTED: no depth sensor)" if bridge.depth_problem is not None else ""
             held = "holding" if bridge.core.engaged else (f"not holding ({bridge.hold_blocked})" if bridge.hold_blocked
                                                            else "not holding")
