@@ -89,3 +89,19 @@ def test_values_that_break_the_ekf_kernel_are_refused_by_its_reader(key, sub, va
 def test_the_packaged_dp_designs_load():
     for name in ("udrone_dp", "bluerov2_heavy_dp"):
         assert Path(load_design_config(name).file).is_file()
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda d: d["lqr"]["state_max"].__setitem__("psi_deg", 5e-324), r"lqr\.state_max\.psi_deg: got 5e-324"),
+    (lambda d: d["measurements"][0].__setitem__("variance", 1e-310), r"measurements\[0\]\.variance: got 1e-310"),
+])
+def test_values_that_underflow_in_the_design_are_refused_by_the_loader(edit, key):
+    """Found by the HMI's fuzzing (issue 28): a Bryson maximum of 5e-324 deg is 0 rad (a NaN weight,
+    no problem reported), a measurement variance of 1e-310 passed the loader and overflowed the
+    design's Riccati step."""
+    from rovlab.params.design import resolve_config_path
+
+    d = read_toml(resolve_config_path("thesis"))
+    edit(d)
+    with pytest.raises(ConfigError, match=key):
+        design_config_from_dict(d, file="thesis.toml")

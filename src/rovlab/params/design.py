@@ -491,7 +491,10 @@ def _measurement(t: TableReader, defaults: FusionSettings,
     if kind and quantity and quantity not in SENSOR_CHANNELS.get(kind, ()):
         t.problem("quantity", quantity, f"a channel of a {kind} sensor: "
                   + ", ".join(c for c in SENSOR_CHANNELS[kind] if c in quantities))
-    variance = t.number("variance", positive=True, what="SI units squared") if t.has("variance") else None
+    # plausible: sigma from 1e-10 (a variance below 1e-20 makes the filter's gain and its design's
+    # Riccati step overflow: 1e-310 reached the HMI as scipy's "must not contain infs or NaNs") to 1e3
+    variance = (t.number("variance", positive=True, plausible=(1e-20, 1e6), what="SI units squared")
+                if t.has("variance") else None)
     source = t.string("source", "")
     fusion = _fusion_settings(t, defaults, t.collector)
     t.finish()
@@ -519,7 +522,11 @@ def _lqr_weights(t: TableReader) -> tuple[np.ndarray, np.ndarray, dict[str, np.n
     smax = np.full(4, np.nan)
     sub = t.table("state_max")
     for key, (i, factor) in _LQR_STATE_KEYS.items():
-        smax[i] = sub.number(key, positive=True) * factor
+        given = sub.number(key, positive=True)
+        smax[i] = given * factor
+        if given > 0 and not smax[i] > 0:  # 5e-324 deg is 0 rad: Bryson's 1/max^2 would be a NaN weight
+            sub.problem(key, given, "a maximum whose value in SI units is a positive number (this one underflows "
+                                    "to 0 when converted)")
     sub.finish()
     umax = np.full(2, np.nan)
     sub = t.table("input_max")
