@@ -169,12 +169,19 @@ def write_figures(out_dir: str | Path, columns: Mapping[str, np.ndarray], meta: 
         ax.legend(fontsize=7, loc="upper right")
     ax = axes[-1]
     _shade(ax, windows)
-    # PWM commands as points: a thruster near zero thrust jumps across the ESC's dead band from
-    # step to step, which a line would draw as a solid block; the band itself is shaded
+    # PWM commands as points (a thruster that crosses the ESC's dead band often would be a solid
+    # block as a line); the band is shaded, and each thruster's legend says how often it changed
+    # sides of the band per second: the chatter a design's pwm_hysteresis_us holds down (a square
+    # wave into a real ESC; docs/simulation.md, "PWM across the dead band")
     ax.axhspan(1500 - 25, 1500 + 25, color="tab:olive", alpha=0.15, lw=0, label="dead band (no thrust)")
+    span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
     for name in columns:
         if name.startswith("pwm_"):
-            ax.plot(t, _col(columns, name), ".", ms=2.0, label=name[4:])
+            pwm = np.asarray(_col(columns, name), dtype=float)
+            side = np.sign(pwm[np.isfinite(pwm) & (np.abs(pwm - 1500.0) >= 24.5)] - 1500.0)  # at or beyond the band
+            flips = int(np.count_nonzero(np.diff(side))) if side.size > 1 else 0
+            rate = f", {flips / span:.2f} side changes/s" if span > 0 else ""
+            ax.plot(t, pwm, ".", ms=2.0, label=f"{name[4:]}{rate}")
     ax.set_ylabel("thruster command [us]")
     ax.set_xlabel("time [s]")
     ax.grid(alpha=0.3)
