@@ -90,7 +90,10 @@ def bank_pwm_into(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, fo
                   out: np.ndarray) -> None:
     """PWM command of every thruster for a vector of thrusts (saturated to their ranges) into out."""
     for i in range(rows.shape[0]):
-        out[i] = _pwm(rows[i], grid_pwm, grid_f[i], force[i])
+        if rows[i, K_KIND] == KIND_QUADRATIC:
+            out[i] = _quad_pwm(rows[i], force[i])
+        else:
+            out[i] = _table_pwm(rows[i], grid_pwm, grid_f[i], force[i])
 
 
 def bank_pwm_hold_into(rows: np.ndarray, grid_pwm: np.ndarray, grid_f: np.ndarray, force: np.ndarray,

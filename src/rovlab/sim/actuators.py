@@ -23,7 +23,7 @@ import numpy as np
 
 from rovlab._jit import njit
 from rovlab.allocation.solvers import Allocator, allocate_into
-from rovlab.models.thrusters import ThrusterBank, bank_force_into, bank_pwm_hold_into
+from rovlab.models.thrusters import ThrusterBank, bank_force_into, bank_pwm_hold_into, bank_pwm_into
 
 _DOF6 = (0, 1, 2, 5)  # X, Y, Z, N in the 6-DOF wrench [X, Y, Z, K, M, N]
 
@@ -90,7 +90,10 @@ def actuate(act, tau, tau_cmd, tau_real, pwm):
     f = act.f
     allocate_into(act.B, act.T, act.s, act.f_min, act.f_max, tau6, act.level, act.n_levels, True, f, act.frac)
     cmd = act.cmd
-    bank_pwm_hold_into(act.rows, act.grid_pwm, act.grid_force, f, act.side, act.sum_f, act.hold_us, cmd)  # f: what it gives
+    if act.hold_us > 0.0:  # f becomes what the thrusters give (0 for one that waits at its edge)
+        bank_pwm_hold_into(act.rows, act.grid_pwm, act.grid_force, f, act.side, act.sum_f, act.hold_us, cmd)
+    else:
+        bank_pwm_into(act.rows, act.grid_pwm, act.grid_force, f, cmd)
     nt = cmd.shape[0]
     if act.pwm_res > 0.0:
         for i in range(nt):
