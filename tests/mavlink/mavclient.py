@@ -15,6 +15,16 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")
 
 
+def wait_until(test: Callable[[], bool], timeout: float) -> bool:
+    """Poll ``test`` every 50 ms until it is true (True) or ``timeout`` seconds pass (False)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if test():
+            return True
+        time.sleep(0.05)
+    return False
+
+
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))

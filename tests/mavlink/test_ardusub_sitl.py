@@ -22,7 +22,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +40,9 @@ pytestmark = [
                        reason=f"no ArduSub SITL at {SITL_DIR} (ArduPilot's ArduSub built for SITL and sub-6dof.parm; "
                               "set ROVLAB_ARDUSUB_SITL to its folder)"),
 ]
+
+sys.path.insert(0, str(Path(__file__).parent))
+from mavclient import wait_until  # noqa: E402
 
 MANUAL = 19  # ArduSub's mode number
 ARMED = 128  # MAV_MODE_FLAG_SAFETY_ARMED
@@ -168,7 +170,7 @@ class Observer:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             self.conn.mav.param_set_send(self.sysid or 1, 1, name.encode(), value, 9)
-            if _wait(lambda: self.params.get(name) == pytest.approx(value), 1.0):
+            if wait_until(lambda: self.params.get(name) == pytest.approx(value), 1.0):
                 return
         raise AssertionError(f"SITL did not take {name} = {value}")
 
@@ -193,15 +195,6 @@ class Observer:
         self.conn.close()
 
 
-def _wait(test: Callable[[], bool], timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if test():
-            return True
-        time.sleep(0.05)
-    return False
-
-
 @pytest.fixture(scope="module")
 def sitl(tmp_path_factory):
     """One ArduSub SITL at sea level for the module: (bridge port, relay, observer)."""
@@ -217,7 +210,7 @@ def sitl(tmp_path_factory):
                              "--serial1", f"udpclient:127.0.0.1:{obs_port}"],
                             cwd=work, stdout=log, stderr=subprocess.STDOUT)
     try:
-        assert _wait(lambda: observer.heartbeat is not None, 60.0), f"ArduSub SITL sent nothing ({work / 'sitl.log'})"
+        assert wait_until(lambda: observer.heartbeat is not None, 60.0), f"ArduSub SITL sent nothing ({work / 'sitl.log'})"
         yield bridge_port, relay, observer
     finally:
         proc.terminate()
@@ -261,11 +254,11 @@ def test_bridge_arms_holds_depth_and_heading_follows_a_step_and_disarms_on_exit(
     thread = threading.Thread(target=bridge.run, daemon=True)
     thread.start()
     try:
-        assert _wait(observer.armed_in_manual, 60.0), "\n".join(lines[-20:])
-        assert _wait(lambda: _held(bridge), 5.0), "\n".join(lines[-20:])
+        assert wait_until(observer.armed_in_manual, 60.0), "\n".join(lines[-20:])
+        assert wait_until(lambda: _held(bridge), 5.0), "\n".join(lines[-20:])
         psi0 = float(bridge.core.reference[3])
         # dive from the surface (SITL floats 0.13 m deep) and settle, then hold for 15 s
-        assert _wait(lambda: abs(bridge.core.last.x[0] - 1.0) < 0.1, 30.0), "did not reach 1 m"
+        assert wait_until(lambda: abs(bridge.core.last.x[0] - 1.0) < 0.1, 30.0), "did not reach 1 m"
         time.sleep(8.0)
         t0 = time.monotonic()
         time.sleep(15.0)
@@ -301,7 +294,7 @@ def test_bridge_arms_holds_depth_and_heading_follows_a_step_and_disarms_on_exit(
         thread.join(15.0)
     assert not thread.is_alive()
     # disarmed on exit, and the last inputs neutral
-    assert _wait(observer.disarmed, 10.0), observer.heartbeat
+    assert wait_until(observer.disarmed, 10.0), observer.heartbeat
     assert bridge.sent and bridge.sent[-1][2]
     assert bridge.counts["failsafes"] == 0 and bridge.counts["implausible_depth"] == 0
 
@@ -353,24 +346,24 @@ def test_telemetry_loss_and_an_implausible_depth_sensor_give_neutral_never_a_pre
     thread = threading.Thread(target=bridge.run, daemon=True)
     thread.start()
     try:
-        assert _wait(lambda: observer.armed_in_manual() and _held(bridge), 60.0), "\n".join(lines[-20:])
-        assert _wait(lambda: abs(bridge.core.last.x[0] - 1.0) < 0.15, 30.0)
+        assert wait_until(lambda: observer.armed_in_manual() and _held(bridge), 60.0), "\n".join(lines[-20:])
+        assert wait_until(lambda: abs(bridge.core.last.x[0] - 1.0) < 0.15, 30.0)
 
         # telemetry lost for 2 s (commands still reach the vehicle): neutral, then the hold resumes
         relay.up = False
         t0 = time.monotonic()
-        assert _wait(lambda: bridge.failsafe, 2.0)
+        assert wait_until(lambda: bridge.failsafe, 2.0)
         time.sleep(2.0 - (time.monotonic() - t0))
         relay.up = True
         servos = observer.window("servos", t0 + 1.0, t0 + 2.0)  # the last second of the gap
         assert len(servos) and np.all(servos[:, 1:] == 1500), servos
-        assert _wait(lambda: not bridge.failsafe and _held(bridge), 5.0), "\n".join(lines[-10:])
+        assert wait_until(lambda: not bridge.failsafe and _held(bridge), 5.0), "\n".join(lines[-10:])
         assert bridge.counts["failsafes"] == 1 and observer.armed_in_manual()  # ArduSub's own failsafe kept quiet
 
         # the water-pressure sensor reads as at a home 584 m above sea level: about -57 600 hPa
         observer.set_param("SIM_BAR2_GLITCH", 584.0)
         t1 = time.monotonic()
-        assert _wait(lambda: bridge.depth_problem is not None and not bridge.core.engaged, 3.0), "\n".join(lines[-10:])
+        assert wait_until(lambda: bridge.depth_problem is not None and not bridge.core.engaged, 3.0), "\n".join(lines[-10:])
         time.sleep(4.0)
         text = "\n".join(lines)
         said = re.search(r"DEPTH SENSOR: SCALED_PRESSURE2 press_abs = (-5\d{4}\.\d*) hPa is implausible: depth "
@@ -385,7 +378,7 @@ def test_telemetry_loss_and_an_implausible_depth_sensor_give_neutral_never_a_pre
 
         # back to plausible: the filter takes the sensor back and the hold resumes, on the same set-point
         observer.set_param("SIM_BAR2_GLITCH", 0.0)
-        assert _wait(lambda: bridge.depth_problem is None and _held(bridge), 20.0), "\n".join(lines[-10:])
+        assert wait_until(lambda: bridge.depth_problem is None and _held(bridge), 20.0), "\n".join(lines[-10:])
         assert float(bridge.core.reference[2]) == 1.0
     finally:
         relay.up = True
@@ -393,4 +386,4 @@ def test_telemetry_loss_and_an_implausible_depth_sensor_give_neutral_never_a_pre
         bridge.stop()
         thread.join(15.0)
     assert not thread.is_alive()
-    assert _wait(observer.disarmed, 10.0)
+    assert wait_until(observer.disarmed, 10.0)

@@ -18,7 +18,7 @@ pytestmark = pytest.mark.skipif(importlib.util.find_spec("pymavlink") is None,
                                 reason="needs pymavlink: pip install 'rovlab[mavlink]'")
 
 sys.path.insert(0, str(Path(__file__).parent))
-from mavclient import free_udp_port, start_rovlab, stop  # noqa: E402
+from mavclient import free_udp_port, start_rovlab, stop, wait_until  # noqa: E402
 
 
 def _bridge(port: int, lines: list[str], **kw):
@@ -28,15 +28,6 @@ def _bridge(port: int, lines: list[str], **kw):
 
     return MavlinkBridge(load_vehicle("bluerov2_heavy"), load_design_config("bluerov2_heavy"),
                          connect=f"udpin:127.0.0.1:{port}", log=lines.append, **kw)
-
-
-def _wait(test, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if test():
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def test_a_misbehaving_vehicle_does_not_stop_the_bridge():
@@ -61,7 +52,7 @@ def test_a_misbehaving_vehicle_does_not_stop_the_bridge():
             fake.mav.param_value_send(b"SYSID_MYGCS", 42.0, 6, 11, 1)
             fake.write(b"\xfd\xff\x00garbage, not MAVLink at all" * 10)  # may swallow what follows: fine
             time.sleep(0.05)
-        assert _wait(lambda: bridge.counts["bad_data"] > 0 and bridge.vehicle_seen, 10.0)
+        assert wait_until(lambda: bridge.counts["bad_data"] > 0 and bridge.vehicle_seen, 10.0)
         assert thread.is_alive()
         assert bridge.core.counters["accepted"] == 0  # nothing non-finite reached the filter
         assert any("SYSID_MYGCS is 42" in line for line in lines)
@@ -69,7 +60,7 @@ def test_a_misbehaving_vehicle_does_not_stop_the_bridge():
         for _ in range(20):
             burst(1013.25 + 1.0 * 1000 * 9.82 / 100, 0.3, 0.0)
             time.sleep(0.05)
-        assert _wait(lambda: bridge.core.counters["accepted"] > 10, 10.0)
+        assert wait_until(lambda: bridge.core.counters["accepted"] > 10, 10.0)
         assert thread.is_alive()
     finally:
         bridge.stop()
@@ -86,15 +77,15 @@ def test_rc_overrides_move_the_thrusters_and_a_disarmed_vehicle_stays_disarmed()
     thread = threading.Thread(target=bridge.run, daemon=True)
     thread.start()
     try:
-        assert _wait(lambda: bridge.armed, 120.0), lines
+        assert wait_until(lambda: bridge.armed, 120.0), lines
         bridge.set_reference(z=3.0, psi=0.0)  # 2 m deeper: the vertical thrusters push down
-        assert _wait(lambda: bridge.servo_pwm is not None and all(p < 1480 for p in bridge.servo_pwm[4:8]), 15.0), \
+        assert wait_until(lambda: bridge.servo_pwm is not None and all(p < 1480 for p in bridge.servo_pwm[4:8]), 15.0), \
             f"vertical thrusters did not push down: {bridge.servo_pwm}"
         last = bridge.sent[-1][1]
         assert len(last) == 8 and last[2] < 1500 and last[0] == 65535  # channel 3 (throttle) down; 1 untouched
         # a pilot disarms the vehicle: the bridge (armed once) must not arm it again
         bridge.conn.mav.command_long_send(1, 1, 400, 0, 0, 0, 0, 0, 0, 0, 0)
-        assert _wait(lambda: not bridge.armed, 5.0)
+        assert wait_until(lambda: not bridge.armed, 5.0)
         time.sleep(2.5)
         assert not bridge.armed and any("disarmed" in line for line in lines)
     finally:
