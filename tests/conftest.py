@@ -21,6 +21,20 @@ def heavy():
     return load_vehicle("bluerov2_heavy")
 
 
+@pytest.fixture(scope="session")
+def udrone_dvl():
+    """uDrone with the DVL its dynamic-positioning scenarios use."""
+    return load_vehicle("udrone_dvl")
+
+
+@pytest.fixture(scope="session")
+def udrone_dp():
+    """The EKF + DP design of uDrone's dynamic-positioning scenarios."""
+    from rovlab.params.design import load_design_config
+
+    return load_design_config("udrone_dp")
+
+
 @pytest.fixture
 def rng():
     import numpy as np

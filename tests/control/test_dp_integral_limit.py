@@ -15,20 +15,9 @@ import numpy as np
 import pytest
 
 from rovlab.control import dp
-from rovlab.params.design import load_design_config
 from rovlab.params.vehicle import load_vehicle
 
 _ROWS = (0, 1, 2, 5)  # X, Y, Z, N in the 6-DOF wrench
-
-
-@pytest.fixture(scope="module")
-def udrone():
-    return load_vehicle("udrone_dvl")
-
-
-@pytest.fixture(scope="module")
-def cfg():
-    return load_design_config("udrone_dp")
 
 
 @pytest.mark.parametrize("name", ["udrone_dvl", "bluerov2_heavy"])
@@ -48,10 +37,10 @@ def test_thrust_capacity_is_what_the_allocation_gives(name):
     assert np.all(lo < 0.0) and np.all(hi > 0.0)
 
 
-def test_integral_limit_maps_the_capacity_through_K_i(udrone, cfg):
+def test_integral_limit_maps_the_capacity_through_K_i(udrone_dvl, udrone_dp):
     """-K_i int within [tau_min, tau_max] in z and psi; x and y (NED) within the largest surge or
     sway force either way."""
-    d = dp.design(udrone, cfg)
+    d = dp.design(udrone_dvl, udrone_dp)
     lo, hi = d.integral_limit
     np.testing.assert_allclose(-d.Ki[2:] * hi[2:], d.tau_min[2:], rtol=1e-12)
     np.testing.assert_allclose(-d.Ki[2:] * lo[2:], d.tau_max[2:], rtol=1e-12)
@@ -59,17 +48,17 @@ def test_integral_limit_maps_the_capacity_through_K_i(udrone, cfg):
     np.testing.assert_allclose(d.Ki[:2] * hi[:2], horizontal, rtol=1e-12)
     np.testing.assert_allclose(-d.Ki[:2] * lo[:2], horizontal, rtol=1e-12)
     # no integral action: no bound
-    d0 = dp.design(udrone, cfg.with_table("dp", replace(cfg.table("dp"), integral_ratio=0.0)))
+    d0 = dp.design(udrone_dvl, udrone_dp.with_table("dp", replace(udrone_dp.table("dp"), integral_ratio=0.0)))
     assert np.all(np.isinf(d0.integral_limit[0])) and np.all(np.isinf(d0.integral_limit[1]))
 
 
 @pytest.mark.parametrize("anti_windup", [1.0, 0.0])
-def test_integral_stays_within_the_capacity_while_the_error_grows(udrone, cfg, anti_windup):
+def test_integral_stays_within_the_capacity_while_the_error_grows(udrone_dvl, udrone_dp, anti_windup):
     """The vehicle pushed off its set-point at 5 cm/s while the thrusters give nothing (a current
     too strong to hold): without the clamp the integral grows with the error (back-calculation: to
     ~15 e, 450 m s at e = 30 m; plain integral: 9000 m s); with it the integral stops where K_i int
     equals uDrone's largest horizontal thrust (40 N forward, so 145 m s) and stays there."""
-    ctrl = dp.build(udrone, cfg.with_table("dp", replace(cfg.table("dp"), anti_windup=anti_windup))).kernel
+    ctrl = dp.build(udrone_dvl, udrone_dp.with_table("dp", replace(udrone_dp.table("dp"), anti_windup=anti_windup))).kernel
     unclamped = ctrl._replace(int_lo=np.full(4, -np.inf), int_hi=np.full(4, np.inf), state=ctrl.state.copy())
     nav = np.zeros(12)
     nav[2] = 1.0
