@@ -113,22 +113,28 @@
       const P = this.period;
       return P ? v - P * Math.round((v - this.center) / P) : v;
     }
+    // fn(ring, i) for every sample within [t0, t1] of the bands (bands true) or of the other series
+    forVisible(t0, t1, bands, fn) {
+      for (const s of this.series) {
+        if ((s.kind === "band") !== bands) continue;
+        const r = s.ring;
+        for (let k = r.lowerBound(t0); k < r.length; k++) {
+          const i = r.index(k);
+          if (r.t[i] > t1) break;
+          fn(r, i);
+        }
+      }
+    }
     // the circular mean of the visible samples (the band's middles if there is nothing else)
     circularCenter(t0, t1) {
       const P = this.period;
       let sx = 0, sy = 0, n = 0;
       for (const bands of [false, true]) {
-        for (const s of this.series) {
-          if ((s.kind === "band") !== bands) continue;
-          const r = s.ring;
-          for (let k = r.lowerBound(t0); k < r.length; k++) {
-            const i = r.index(k);
-            if (r.t[i] > t1) break;
-            const v = r.width > 1 ? 0.5 * (r.v[i * 2] + r.v[i * 2 + 1]) : r.v[i];
-            const a = 2 * Math.PI * v / P;
-            sx += Math.cos(a); sy += Math.sin(a); n++;
-          }
-        }
+        this.forVisible(t0, t1, bands, (r, i) => {
+          const v = r.width > 1 ? 0.5 * (r.v[i * 2] + r.v[i * 2 + 1]) : r.v[i];
+          const a = 2 * Math.PI * v / P;
+          sx += Math.cos(a); sy += Math.sin(a); n++;
+        });
         if (n) break;
       }
       return n && (sx * sx + sy * sy) > 1e-18 ? Math.atan2(sy, sx) * P / (2 * Math.PI) : this.center;
@@ -180,23 +186,17 @@
     }
     extent(t0, t1, bands) {
       let lo = Infinity, hi = -Infinity;
-      for (const s of this.series) {
-        if ((s.kind === "band") !== bands) continue;
-        const r = s.ring;
-        for (let k = r.lowerBound(t0); k < r.length; k++) {
-          const i = r.index(k);
-          if (r.t[i] > t1) break;
-          if (r.width > 1) {  // a band: its middle unwrapped, its width kept
-            const a = r.v[2 * i], b = r.v[2 * i + 1], m = this.unwrap(0.5 * (a + b)), h = 0.5 * (b - a);
-            if (m - h < lo) lo = m - h;
-            if (m + h > hi) hi = m + h;
-          } else {
-            const v = this.unwrap(r.v[i]);
-            if (v < lo) lo = v;
-            if (v > hi) hi = v;
-          }
+      this.forVisible(t0, t1, bands, (r, i) => {
+        if (r.width > 1) {  // a band: its middle unwrapped, its width kept
+          const a = r.v[2 * i], b = r.v[2 * i + 1], m = this.unwrap(0.5 * (a + b)), h = 0.5 * (b - a);
+          if (m - h < lo) lo = m - h;
+          if (m + h > hi) hi = m + h;
+        } else {
+          const v = this.unwrap(r.v[i]);
+          if (v < lo) lo = v;
+          if (v > hi) hi = v;
         }
-      }
+      });
       return [lo, hi];
     }
     yRange(t0, t1) {
