@@ -232,15 +232,14 @@ def _cmd_record(args: argparse.Namespace) -> int:
     import time
 
     from rovlab.interfaces.cli import UserError
-    from rovlab.interfaces.mavlink import MavlinkMissing, mavutil
+    from rovlab.interfaces.mavlink import MavlinkMissing, connection
     from rovlab.interfaces.mavlink.logs import TelemetryRecorder
 
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be > 0 s, got {args.duration}")
     _check_connect(args.connect)
     try:
-        conn = mavutil().mavlink_connection(args.connect, source_system=255, source_component=191,
-                                            dialect="ardupilotmega")
+        conn = connection(args.connect, source_system=255, source_component=191)
     except MavlinkMissing as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:

@@ -217,11 +217,10 @@ def read_parameters(path: str | Path) -> dict[str, float]:
         raise ParameterError(f"{p}: no such file")
     if p.suffix.lower() not in LOG_SUFFIXES:
         raise ParameterError(f"{p}: not an ArduSub log (expected {' or '.join(LOG_SUFFIXES)})")
-    from rovlab.interfaces.mavlink import mavutil
+    from rovlab.interfaces.mavlink import connection
 
-    mu = mavutil()
     try:
-        conn = mu.mavlink_connection(os.fspath(p), dialect="ardupilotmega")
+        conn = connection(os.fspath(p))
     except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on a corrupt file
         raise ParameterError(f"{p}: cannot be read as a MAVLink log ({type(exc).__name__}: {exc})") from None
     params: dict[str, float] = {}
@@ -260,12 +259,10 @@ def fetch_parameters(url: str, *, timeout_s: float = 30.0, source_system: int = 
     ``timeout_s`` (the link is closed either way)."""
     import time
 
-    from rovlab.interfaces.mavlink import mavutil
+    from rovlab.interfaces.mavlink import connection
 
-    mu = mavutil()
     try:
-        conn = mu.mavlink_connection(url, source_system=source_system, source_component=190,
-                                     dialect="ardupilotmega")
+        conn = connection(url, source_system=source_system, source_component=190)
     except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds for a bad address
         raise ParameterError(f"{url}: cannot open the link ({type(exc).__name__}: {exc})") from None
     try:

@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from rovlab.allocation.mixing import Mixer
-from rovlab.interfaces.mavlink import dialect, mavutil
+from rovlab.interfaces.mavlink import connection, dialect
 from rovlab.interfaces.mavlink.ardusub import DATA_STREAM_NAMES, MODE_NAMES, MODES, MY_GCS, MY_GCS_HIGH, STREAM_OF_MESSAGE
 from rovlab.interfaces.mavlink.logs import SampleMap, TelemetryRecorder
 from rovlab.interfaces.mavlink.units import (
@@ -131,8 +131,7 @@ class MavlinkBridge:
         self.smap = SampleMap(vehicle, tuple(self.core.design.estimator.channels))
         self._sample_of = {c.column: (c.sensor, c.quantity) for c in self.core.channels}
         self.mav = dialect()
-        self.conn = mavutil().mavlink_connection(connect, source_system=self.sysid, source_component=compid,
-                                                 dialect="ardupilotmega")
+        self.conn = connection(connect, source_system=self.sysid, source_component=compid)
         self.connect = connect
         self.recorder = TelemetryRecorder(record, metadata={"connect": connect, "vehicle": vehicle.name,
                                                             "config": config.name}) if record else None

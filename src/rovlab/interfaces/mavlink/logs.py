@@ -108,9 +108,9 @@ def read_records(path: str | Path) -> list[Record]:
 
 
 def _read_tlog(path: Path) -> list[Record]:
-    from rovlab.interfaces.mavlink import mavutil
+    from rovlab.interfaces.mavlink import connection
 
-    mlog = mavutil().mavlink_connection(str(path), dialect="ardupilotmega")
+    mlog = connection(str(path))
     out: list[Record] = []
     try:
         while True:
@@ -139,10 +139,10 @@ def _read_bin(path: Path) -> list[Record]:
     degrees, the AHRS attitude) -> ATTITUDE [rad], with yawspeed the latest IMU (instance 0) GyrZ
     [rad/s]; RCOU C1..C16 -> SERVO_OUTPUT_RAW servo1_raw..; PARM -> PARAM_VALUE. Times: the log's
     own (boot time, or UTC once the autopilot had it) [s]."""
-    from rovlab.interfaces.mavlink import mavutil
+    from rovlab.interfaces.mavlink import connection
 
     try:
-        mlog = mavutil().mavlink_connection(str(path))
+        mlog = connection(str(path))
     except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on a corrupt file
         raise LogError(f"{path}: not a readable DataFlash log ({type(exc).__name__}: {exc})") from None
     out: list[Record] = []

@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from rovlab.allocation.mixing import Mixer
-from rovlab.interfaces.mavlink import dialect, mavutil
+from rovlab.interfaces.mavlink import connection, dialect
 from rovlab.interfaces.mavlink.ardusub import (
     BUTTON_GAIN_DEC,
     BUTTON_GAIN_INC,
@@ -113,7 +113,6 @@ class ArduSubSim:
         ``firmware``: the generation of parameter names ("4.7" or "4.1"); ``home``: latitude,
         longitude [deg] and altitude [m] of the home position and EKF origin (at the NED origin), or
         None for a vehicle without one."""
-        mu = mavutil()
         self.mav = dialect()
         self.sim = sim
         self.vehicle = vehicle = sim.prep.vehicle
@@ -137,8 +136,7 @@ class ArduSubSim:
             raise ValueError(f"home must be latitude -90 .. 90, longitude -180 .. 180 [deg] and a finite altitude, "
                              f"got {home!r}")
         self.home = home
-        self.conn = mu.mavlink_connection(connect, source_system=self.sysid, source_component=1,
-                                          dialect="ardupilotmega")
+        self.conn = connection(connect, source_system=self.sysid, source_component=1)
         self.connect = connect
         self.local_position = local_position
         self.log = log or (lambda text: None)
