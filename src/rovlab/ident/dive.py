@@ -528,12 +528,14 @@ class DiveFit:
     valid_span: tuple[float, float]
     prediction: Mapping[str, Mapping[str, list[float]]]  # output -> {"identified": [..], "file": [..], "n": [..]}
     notes: tuple[str, ...] = ()
+    compare: Any = None  # the published set scored as rows["published"] (rovlab.ident.published.PublishedSet)
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"file": self.file, "identification_s": list(self.ident_span),
                                "validation_s": list(self.valid_span), "notes": list(self.notes),
                                "prediction_rmse": {k: dict(v) for k, v in self.prediction.items()},
-                               "prediction_step_s": PREDICTION_STEP_S, "horizons": list(HORIZONS)}
+                               "prediction_step_s": PREDICTION_STEP_S, "horizons": list(HORIZONS),
+                               "published_set": self.compare.as_dict() if self.compare is not None else None}
         for dof, f in self.fits.items():
             out[dof] = {"refused": f.refused_dof or None,
                         "parameters": {p.name: {"estimate": p.estimate, "sigma": p.sigma, "start": p.start,
@@ -779,9 +781,10 @@ def equation_error(data: DiveData, dof: str, start: DofModel, t0: float, t1: flo
 
 def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] = DOFS,
                   free: Mapping[str, Sequence[str]] | Sequence[str] | None = None, split: float = 0.7,
-                  max_rel: float = MAX_REL) -> DiveFit:
+                  max_rel: float = MAX_REL, compare: Any = None) -> DiveFit:
     """Identify heave and yaw from a dive (module docstring); ``split``: the share of the log used
-    to identify (the rest validates)."""
+    to identify (the rest validates); ``compare``: a published parameter set
+    (rovlab.ident.published.PublishedSet) whose predictions are scored too."""
     if not 0.2 <= split <= 0.95:
         raise IdentificationError(f"split must be within 0.2 .. 0.95 (the share of the log used to identify), got {split}")
     a, b = data.span
@@ -795,8 +798,9 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] = DOF
                                       "need position or velocity in the log)")
         chosen = free.get(dof, DEFAULT_FREE) if isinstance(free, Mapping) else (free or DEFAULT_FREE)
         fits[dof] = fit_dof(data, dof, dof_model(vehicle, dof), a, t_split, free=chosen, max_rel=max_rel)
-    pred = prediction_errors(data, {d: f.model for d, f in fits.items() if not f.refused_dof},
-                             {d: dof_model(vehicle, d) for d in fits if not fits[d].refused_dof}, t_split, b)
+    kept = tuple(d for d in fits if not fits[d].refused_dof)
+    pred = prediction_errors(data, {d: fits[d].model for d in kept}, {d: dof_model(vehicle, d) for d in kept},
+                             t_split, b, published=compare.models(vehicle, kept) if compare is not None else None)
     notes = data.notes
     depth = data.channel("heave", "position")
     if depth is not None and depth.y.size and abs(float(np.median(depth.y))) < 0.3:
@@ -805,22 +809,25 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] = DOF
         notes += (f"the depth stays near the surface (median {float(np.median(depth.y)):.3g} m; the free surface cuts "
                   f"the hull above {0.5 * hull_height(vehicle):.2f} m): a surface log; heave and yaw are identified "
                   "below 1 m (rovlab lab plan-dive keeps the vehicle there)",)
-    return DiveFit(data.file, fits, (a, t_split), (t_split, b), pred, notes)
+    return DiveFit(data.file, fits, (a, t_split), (t_split, b), pred, notes, compare)
 
 
 def prediction_errors(data: DiveData, identified: Mapping[str, DofModel], start: Mapping[str, DofModel],
                       t0: float, t1: float, *, step_s: float = PREDICTION_STEP_S,
-                      horizons: Sequence[int] = HORIZONS, every_s: float = 1.0) -> dict[str, dict[str, list[float]]]:
+                      horizons: Sequence[int] = HORIZONS, every_s: float = 1.0,
+                      published: Mapping[str, DofModel] | None = None) -> dict[str, dict[str, list[float]]]:
     """k-step prediction RMSE of depth and heading on [t0, t1] against the measurements, from the
     same initial states for every model (module docstring): heading and yaw rate from their latest
     samples; depth and heave velocity from a smoothing spline of the depth samples of the segment
     (the 2 Hz depth gives no velocity of its own: the spline's state is what motion capture's would
-    be in a tank)."""
+    be in a tank). ``published``: a third model per DOF (rovlab.ident.published), scored as
+    ``rows["published"]``."""
     from scipy.interpolate import make_smoothing_spline
 
     out: dict[str, dict[str, list[float]]] = {}
     for dof in identified:
-        models = (identified[dof], start[dof])
+        keys = ("identified", "file") + (("published",) if published and dof in published else ())
+        models = (identified[dof], start[dof]) + ((published[dof],) if published and dof in published else ())
         pos = data.channel(dof, "position")
         vel = data.channel(dof, "velocity")
         if pos is None:
@@ -834,35 +841,103 @@ def prediction_errors(data: DiveData, identified: Mapping[str, DofModel], start:
         spl = make_smoothing_spline(tm[0::2], ym[0::2]) if vel is None else None
         tgt = tm[1::2] if vel is None else tm
         label = "depth_m" if dof == "heave" else "heading_rad"
-        rows: dict[str, list[float]] = {"identified": [], "file": [], "n": []}
+        rows: dict[str, list[float]] = {k: [] for k in (*keys, "n")}
         step = float(np.median(np.diff(tgt)))
         stride = max(1, int(round(every_s / max(step, 1e-3))))
         for k in horizons:
             horizon = k * step_s
-            errs: list[list[float]] = [[], []]
+            errs: list[list[float]] = [[] for _ in models]
             targets = tgt[(tgt >= t0 + horizon + 2.0) & (tgt <= tm[-1] - 1.0)][::stride]
             for tt in targets:
                 ts = tt - horizon
-                if spl is not None:
-                    init = (float(spl(ts)), float(spl.derivative()(ts)))
-                else:
-                    assert vel is not None
-                    i = int(np.searchsorted(pos.t, ts + 1e-9)) - 1
-                    j = int(np.searchsorted(vel.t, ts + 1e-9)) - 1
-                    if i < 0 or j < 0:
-                        continue
-                    init = (float(pos.y[i] + vel.y[j] * (ts - pos.t[i])), float(vel.y[j]))
+                init = _state_at(pos, vel, spl, ts)
+                if init is None:
+                    continue
                 y = float(pos.y[np.searchsorted(pos.t, tt - 1e-9)])
-                n = max(1, int(round(horizon / GRID_S)))
-                tau = _held(data, ts + (horizon / n) * np.arange(n), _DOF_INDEX[dof]).tolist()
                 for i, mdl in enumerate(models):
-                    ps, _ = simulate(mdl, tau, horizon / n, init[0], init[1])
-                    errs[i].append(ps[-1] - y)
-            for i, key in enumerate(("identified", "file")):
+                    errs[i].append(_predict(data, dof, mdl, init, ts, horizon)[1][-1] - y)
+            for i, key in enumerate(keys):
                 e = np.asarray(errs[i])
                 rows[key].append(float(np.sqrt(np.mean(e**2))) if e.size else math.nan)
             rows["n"].append(len(errs[0]))
         out[label] = rows
+    return out
+
+
+def _state_at(pos: Channel, vel: Channel | None, spl: Any, ts: float) -> tuple[float, float] | None:
+    """Initial (position, velocity) at ``ts`` from the data alone: a smoothing spline of the depth
+    (``spl``), or the latest heading and yaw-rate samples."""
+    if spl is not None:
+        return float(spl(ts)), float(spl.derivative()(ts))
+    assert vel is not None
+    i = int(np.searchsorted(pos.t, ts + 1e-9)) - 1
+    j = int(np.searchsorted(vel.t, ts + 1e-9)) - 1
+    if i < 0 or j < 0:
+        return None
+    return float(pos.y[i] + vel.y[j] * (ts - pos.t[i])), float(vel.y[j])
+
+
+def _predict(data: DiveData, dof: str, model: DofModel, init: tuple[float, float], ts: float,
+             horizon: float) -> tuple[np.ndarray, np.ndarray]:
+    """The model's position from ``init`` at ``ts`` over ``horizon`` seconds with the logged input:
+    (times, positions) on a grid of at most GRID_S."""
+    n = max(1, int(math.ceil(horizon / GRID_S - 1e-9)))
+    h = horizon / n
+    tau = _held(data, ts + h * np.arange(n), _DOF_INDEX[dof]).tolist()
+    ps, _ = simulate(model, tau, h, init[0], init[1])
+    return ts + h * np.arange(n + 1), np.asarray(ps)
+
+
+@dataclass(frozen=True, eq=False)
+class Trace:
+    """One output on the validation segment: the measurements and each model's predictions."""
+
+    output: str  # "depth_m" or "heading_rad"
+    t: np.ndarray  # measurement times [s]
+    y: np.ndarray  # measurements [m | rad, unwrapped]
+    k_step: Mapping[str, tuple[np.ndarray, np.ndarray]]  # model -> (target times, k-step-ahead predictions)
+    free: Mapping[str, tuple[np.ndarray, np.ndarray]]  # model -> (times, free-run simulation)
+    k: int
+    free_start: float
+
+
+def validation_traces(data: DiveData, models: Mapping[str, Mapping[str, DofModel]], t0: float, t1: float, *,
+                      k: int = 10, step_s: float = PREDICTION_STEP_S, every_s: float = 0.5) -> list[Trace]:
+    """Depth and heading on [t0, t1] with each model's ``k``-step-ahead predictions (every
+    ``every_s``, from the same data-only initial states as :func:`prediction_errors`) and its free
+    run from the segment's start (2 s in: the spline's end) with the logged input only. ``models``:
+    label -> {dof: DofModel} (e.g. identified, file, published)."""
+    from scipy.interpolate import make_smoothing_spline
+
+    out = []
+    horizon = k * step_s
+    for dof in ("heave", "yaw"):
+        pos, vel = data.channel(dof, "position"), data.channel(dof, "velocity")
+        use = {lab: m[dof] for lab, m in models.items() if dof in m}
+        if pos is None or not use:
+            continue
+        m = (pos.t >= t0) & (pos.t <= t1)
+        if m.sum() < 10:
+            continue
+        tm, ym = pos.t[m], pos.y[m]
+        spl = make_smoothing_spline(tm[0::2], ym[0::2]) if vel is None else None  # as prediction_errors
+        targets = np.arange(tm[0] + horizon + 2.0, tm[-1] - 1.0, every_s)
+        k_step: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        free: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        ts0 = float(tm[0] + 2.0)
+        init0 = _state_at(pos, vel, spl, ts0)
+        for lab, mdl in use.items():
+            tt, pp = [], []
+            for target in targets:
+                init = _state_at(pos, vel, spl, float(target - horizon))
+                if init is None:
+                    continue
+                tt.append(float(target))
+                pp.append(float(_predict(data, dof, mdl, init, float(target - horizon), horizon)[1][-1]))
+            k_step[lab] = (np.asarray(tt), np.asarray(pp))
+            if init0 is not None:
+                free[lab] = _predict(data, dof, mdl, init0, ts0, float(tm[-1]) - ts0)
+        out.append(Trace("depth_m" if dof == "heave" else "heading_rad", tm, ym, k_step, free, k, ts0))
     return out
 
 

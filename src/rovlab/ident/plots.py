@@ -271,3 +271,100 @@ def plot_added_mass(estimate, path: str | Path, *, title: str = "") -> Path:
                            f"Z_wdot {estimate.Z_wdot:.3f} kg, N_rdot {estimate.N_rdot:.4f} kg m²; λ = {estimate.scale:.3f}"),
                  fontsize=9)
     return _save(fig, path)
+
+
+_DIVE_STYLE = {"identified": ("C3", "identified"), "file": ("C0", "vehicle file"), "published": ("C2", "published")}
+
+
+def plot_dive(fit, traces, path: str | Path, *, title: str = "") -> Path:
+    """Validation of a dive identification (rovlab.ident.dive): on the validation segment, the
+    measured depth against each model's k-step-ahead predictions and free runs, the heading
+    prediction errors (a heading that turns through hundreds of degrees hides errors of a few), and
+    the 1/10/100-step prediction RMSE per model as bars. ``traces``: rovlab.ident.dive.validation_traces."""
+    from rovlab.ident.dive import HORIZONS, PREDICTION_STEP_S
+
+    rows = 2 * len(traces) + 1
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise PlotUnavailable(INSTALL_HINT) from exc
+    fig = Figure(figsize=(10.0, 2.2 * rows + 0.8), layout="constrained")
+    FigureCanvasAgg(fig)
+    gs = fig.add_gridspec(rows, 2, height_ratios=[1.0] * (rows - 1) + [1.15])
+    pub = getattr(fit, "compare", None)
+    labels = {k: v[1] for k, v in _DIVE_STYLE.items()}
+    if pub is not None:
+        labels["published"] = f"published set {pub.name}"
+    first = None
+    handles: dict[str, Any] = {}
+    for i, tr in enumerate(traces):
+        depth = tr.output == "depth_m"
+        for j, (kind, series) in enumerate((("k", tr.k_step), ("free", tr.free))):
+            a = fig.add_subplot(gs[2 * i + j, :], sharex=first)
+            first = first or a
+            how = (f"{tr.k}-step-ahead prediction ({tr.k * PREDICTION_STEP_S:g} s ahead of the data's state)"
+                   if kind == "k" else f"free run from t = {tr.free_start:.1f} s (the logged input only)")
+            if depth:
+                span = max(float(np.ptp(tr.y)), 0.05)
+                h = a.plot(tr.t, tr.y, ".", ms=2.5, color="0.3", zorder=1)[0]
+                handles.setdefault("measured", (h, "measured (depth, heading)"))
+                for model, (t, p) in series.items():
+                    color = _DIVE_STYLE.get(model, ("C4", model))[0]
+                    h = a.plot(t, p, color=color, lw=1.2, zorder=3 if model == "identified" else 2)[0]
+                    handles.setdefault(model, (h, labels.get(model, model)))
+                a.set_ylim(float(np.max(tr.y)) + 0.25 * span, float(np.min(tr.y)) - 0.25 * span)  # down is down
+                a.set_ylabel("depth [m]\n(positive down)")
+                a.set_title(f"depth: {how}; lines leaving the plot are clipped", fontsize=9, loc="left")
+            else:
+                a.axhline(0.0, color="0.3", lw=0.8)
+                worst = 1.0
+                for model, (t, p) in series.items():
+                    color = _DIVE_STYLE.get(model, ("C4", model))[0]
+                    err = np.degrees(p - np.interp(t, tr.t, tr.y))
+                    h = a.plot(t, err, color=color, lw=1.1, zorder=3 if model == "identified" else 2)[0]
+                    handles.setdefault(model, (h, labels.get(model, model)))
+                    if model == "identified" and err.size:
+                        worst = max(worst, float(np.max(np.abs(err))))
+                if kind == "k":
+                    a.set_ylim(-4.0 * worst, 4.0 * worst)
+                else:  # free runs drift by tens of degrees: linear within +-1 deg, logarithmic beyond
+                    a.set_yscale("symlog", linthresh=1.0)
+                    a.set_ylim(-360.0, 360.0)
+                a.set_ylabel("heading error [deg]\n(model - measured)")
+                a.set_title(f"heading: {how}; measured heading turns {np.degrees(np.ptp(tr.y)):.0f} deg "
+                            "in this segment; clipped", fontsize=9, loc="left")
+            if 2 * i + j == 2 * len(traces) - 1:
+                a.set_xlabel("time [s] (validation segment)")
+    for col, out in enumerate(("depth_m", "heading_rad")):
+        a = fig.add_subplot(gs[rows - 1, col])
+        rmse = fit.prediction.get(out)
+        scale, unit, what = (1.0, "m", "depth") if out == "depth_m" else (180.0 / np.pi, "deg", "heading")
+        if not rmse:
+            a.text(0.5, 0.5, f"no {what} prediction (DOF not identified)", ha="center", va="center",
+                   transform=a.transAxes, fontsize=8)
+            a.set_axis_off()
+            continue
+        models = [m for m in ("identified", "file", "published") if m in rmse]
+        x = np.arange(len(HORIZONS))
+        w = 0.8 / len(models)
+        for k, m in enumerate(models):
+            vals = np.asarray(rmse[m], dtype=float) * scale
+            bars = a.bar(x + (k - (len(models) - 1) / 2) * w, vals, w, color=_DIVE_STYLE[m][0])
+            handles.setdefault(m, (bars, labels[m]))
+            for b, v in zip(bars, vals):
+                if np.isfinite(v):
+                    a.annotate(f"{v:.2g}", (b.get_x() + b.get_width() / 2, v), ha="center", va="bottom", fontsize=7,
+                               xytext=(0, 1), textcoords="offset points")
+        a.set_yscale("log")
+        a.margins(y=0.15)
+        a.set_xticks(x, [f"{h} step{'s' if h > 1 else ''} ({h * PREDICTION_STEP_S:g} s)" for h in HORIZONS])
+        a.set_ylabel(f"{what} RMSE [{unit}]")
+        a.set_title(f"{what}: prediction RMSE, validation segment", fontsize=9, loc="left")
+    a0, a1 = fit.ident_span
+    head = title or (f"Dive validation: identified on {a0:.0f}-{a1:.0f} s, validated on "
+                     f"{fit.valid_span[0]:.0f}-{fit.valid_span[1]:.0f} s")
+    order = [k for k in ("measured", "identified", "file", "published") if k in handles]
+    fig.legend([handles[k][0] for k in order], [handles[k][1] for k in order], loc="outside upper center",
+               ncol=len(order), fontsize=8, title=head, title_fontsize=10, frameon=False)
+    return _save(fig, path)

@@ -157,14 +157,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", metavar="LOG")
     p.add_argument("--vehicle", required=True, metavar="NAME|FILE",
                    help="the vehicle file to start from (thrust curves, sensors, rigid-body mass and inertia)")
-    p.add_argument("--dofs", default="heave,yaw", help="DOFs to identify (default heave,yaw)")
+    p.add_argument("--dofs", help="DOFs to identify, from heave, yaw, surge, sway (default heave,yaw, and surge,sway "
+                                   "when the log carries position or velocity: a DVL's u, v or a position's x, y)")
     p.add_argument("--free", default="added_mass,linear,quadratic,net_buoyancy",
                    help="parameters to estimate per DOF, from added_mass, linear, quadratic, net_buoyancy, "
                         "thrust_scale (default added_mass,linear,quadratic,net_buoyancy; added_mass and thrust_scale "
                         "exclude each other: no dive tells them apart)")
     p.add_argument("--split", type=_positive, default=0.7, metavar="SHARE",
                    help="share of the log used to identify; the rest validates (0.7)")
+    p.add_argument("--compare", metavar="NAME|FILE|none",
+                   help="a published parameter set whose predictions are scored too: a packaged set (wu2018) or a "
+                        "TOML file of sets (FILE:NAME picks one); default: the packaged set listed for the vehicle "
+                        "(bluerov2_heavy: wu2018), none for other vehicles")
     p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+    p.add_argument("--plot", metavar="PNG", help="write the validation figure here (default: <log stem>-dive.png in the "
+                   "working directory)")
+    p.add_argument("--no-plot", action="store_true", help="do not write a figure")
     p.add_argument("--update", metavar="VEHICLE.toml",
                    help="write the estimates into this vehicle file (comments kept, source notes with the log, time "
                         "span, method and standard deviations; validated before writing)")
@@ -242,7 +250,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "values, with its sensors' noise) before anything is flown.")
     p.add_argument("--vehicle", default="bluerov2_heavy", metavar="NAME|FILE",
                    help="packaged name or TOML file (bluerov2_heavy)")
-    p.add_argument("--dofs", default="heave,yaw", help="DOFs to excite (default heave,yaw)")
+    p.add_argument("--dofs", default="heave,yaw", help="DOFs to excite, from heave, yaw, surge, sway (default heave,yaw; "
+                                                       "surge and sway need a DVL or a position sensor in the vehicle "
+                                                       "file)")
     p.add_argument("--duration", type=_positive, default=300.0, metavar="S", help="length of the manoeuvre (300 s)")
     p.add_argument("--depth-min", type=_positive, default=1.0, metavar="M", help="top of the depth band (1 m)")
     p.add_argument("--depth-max", type=_positive, default=3.0, metavar="M", help="bottom of the depth band (3 m)")
@@ -250,6 +260,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="heave speed the largest level reaches (0.4 m/s)")
     p.add_argument("--yaw-rate", type=_positive, default=60.0, metavar="DEG/S",
                    help="yaw rate the largest level reaches (60 deg/s)")
+    p.add_argument("--surge-speed", type=_positive, default=0.4, metavar="M/S",
+                   help="surge speed the largest level reaches (0.4 m/s)")
+    p.add_argument("--sway-speed", type=_positive, default=0.3, metavar="M/S",
+                   help="sway speed the largest level reaches (0.3 m/s)")
+    p.add_argument("--box-m", type=_positive, default=10.0, metavar="M",
+                   help="surge/sway: side of the square about the start the vehicle is kept in (10 m)")
     p.add_argument("--seed", type=_seed, default=0, help="random seed of the sequence (0)")
     p.add_argument("--out", required=True, metavar="PLAN.toml", help="plan file to write")
     p.add_argument("--json", action="store_true", help="print the plan's summary and expected sigmas as JSON")
@@ -822,7 +838,8 @@ def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
     v = _lab_vehicle(args)
     plan = _lab_call(lambda: dive_plan.plan_dive(
         v, _dofs_arg(args.dofs), args.duration, seed=args.seed, depth_min=args.depth_min, depth_max=args.depth_max,
-        heave_speed=args.heave_speed, yaw_rate=math.radians(args.yaw_rate)))
+        heave_speed=args.heave_speed, yaw_rate=math.radians(args.yaw_rate), surge_speed=args.surge_speed,
+        sway_speed=args.sway_speed, box_m=args.box_m))
     expected = dive_plan.expected_sigmas(v, plan)
     command = (f"rovlab lab plan-dive --vehicle {args.vehicle} --dofs {','.join(plan.dofs)} --duration {args.duration:g} "
                f"--seed {args.seed} ({_dt.date.today().isoformat()})")
@@ -846,7 +863,7 @@ def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
           f"{plan.depth_min:g}-{plan.depth_max:g} m")
     for dof, a in amp.items():
         lo, hi = plan.capacity[dof]
-        unit = "N" if dof == "heave" else "N m"
+        unit = "N m" if dof == "yaw" else "N"
         print(f"  {dof}: levels up to {a:.3g} {unit} (thrusters give {lo:.3g} .. {hi:.3g} {unit} in {dof} alone)")
     print("expected standard deviations (Cramér-Rao, at the vehicle file's values, first 70 % of the log):")
     print(f"  {'parameter':10s} {'guess':>12s} {'sigma':>12s} {'sigma %':>9s}")
@@ -854,6 +871,10 @@ def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
         pct = f"{e.percent:8.2f}%" if math.isfinite(e.percent) else "        -"
         print(f"  {e.name:10s} {e.guess:12.5g} {e.sigma:12.3g} {pct}  {e.unit}")
     print("  (the heading's AHRS errors counted as correlated over 0.5 s; a guess of 0 has no percentage)")
+    if plan.horizontal:
+        print(f"  surge/sway: in every other 40 s period, the yaw excitation off and the heading held (gain "
+              f"{plan.heading_gain:g} N m/rad, damping {plan.heading_damping:g} N m s/rad); box {plan.box_m:g} m about "
+              f"the start (position law {plan.position_gain:g} N/m)")
     print(f"next: {nxt}")
     return 0
 
@@ -887,11 +908,11 @@ def _cmd_dive(args: argparse.Namespace) -> int:
 
     if not 0.2 <= args.split <= 0.95:
         raise _user_error(f"--split must be within 0.2 .. 0.95 (the share of the log used to identify), got {args.split:g}")
-    dofs = _dofs_arg(args.dofs)
-    bad = [d for d in dofs if d not in dive.DOFS]
-    if bad or not dofs:
-        raise _user_error(f"--dofs {args.dofs}: identification from dives covers {', '.join(dive.DOFS)} (surge and sway "
-                          "need position or velocity in the log)")
+    dofs = _dofs_arg(args.dofs) if args.dofs is not None else None
+    bad = [d for d in dofs or () if d not in dive.ALL_DOFS]
+    if bad or dofs == []:
+        raise _user_error(f"--dofs {args.dofs}: identification from dives covers {', '.join(dive.ALL_DOFS)} (surge and "
+                          "sway need position or velocity in the log)")
     free = _dofs_arg(args.free)
     unknown = [k for k in free if k not in dive.KEYS]
     if unknown or not free:
@@ -902,7 +923,12 @@ def _cmd_dive(args: argparse.Namespace) -> int:
         data = _run(args.file, lambda: read_dive_log(args.file, v))
     except (ValueError, RuntimeError) as exc:  # rovlab.interfaces.mavlink.logs.LogError, a missing pymavlink
         raise _user_error(str(exc)) from None
-    fit = _run(args.file, lambda: dive.identify_dive(data, v, dofs=dofs, free=free, split=args.split))
+    if dofs is None:
+        from rovlab.ident.horizontal import default_dofs
+
+        dofs = list(default_dofs(data))
+    compare = _compare_set(args.compare, v)
+    fit = _run(args.file, lambda: dive.identify_dive(data, v, dofs=dofs, free=free, split=args.split, compare=compare))
     updated = None
     if target is not None:
         edits = dive.dive_edits(fit, v)
@@ -921,14 +947,41 @@ def _cmd_dive(args: argparse.Namespace) -> int:
             updated = str(target)
             print(f"updated {target}: " + ", ".join(edits) + "; source notes: " + "; ".join(notes.values()),
                   file=sys.stderr)
-    d = fit.as_dict() | {"vehicle": v.name, "updated": updated}
-    _emit(args, d, _dive_text(fit, v.name))
+    png = _plot(args, "dive", lambda p: _dive_figure(fit, data, v, p))
+    d = fit.as_dict() | {"vehicle": v.name, "updated": updated, "plot": png}
+    _emit(args, d, _dive_text(fit, v.name, args.compare) + (f"\n  figure: {png}" if png else ""))
     return 0
 
 
-def _dive_text(fit, vehicle: str) -> str:
+def _compare_set(text: str | None, vehicle: Any) -> Any:
+    """The published set to score (rovlab.ident.published): --compare NAME|FILE, 'none', or the
+    vehicle's default."""
+    from rovlab.ident import published
+
+    if text is not None and text.strip().lower() == "none":
+        return None
+    try:
+        return published.default_set(vehicle) if text is None else published.load_set(text)
+    except (ValueError, OSError) as exc:  # IdentificationError is a ValueError
+        raise _user_error(str(exc)) from None
+
+
+def _dive_figure(fit: Any, data: Any, vehicle: Any, path: Path) -> Any:
+    from rovlab.ident import dive, plots
+
+    models = {"identified": {d: f.model for d, f in fit.fits.items() if not f.refused_dof},
+              "file": {d: dive.dof_model(vehicle, d) for d, f in fit.fits.items() if not f.refused_dof}}
+    if fit.compare is not None:
+        models["published"] = fit.compare.models(vehicle, tuple(models["file"]))
+    traces = dive.validation_traces(data, models, *fit.valid_span)
+    return plots.plot_dive(fit, traces, path, title=f"Dive validation: {Path(fit.file).name} ({vehicle.name}), "
+                                                    f"identified on {fit.ident_span[0]:.0f}-{fit.ident_span[1]:.0f} s, "
+                                                    f"validated on {fit.valid_span[0]:.0f}-{fit.valid_span[1]:.0f} s")
+
+
+def _dive_text(fit, vehicle: str, compare_arg: str | None = None) -> str:
     a, b = fit.ident_span
-    lines = [f"heave and yaw from {fit.file} (vehicle {vehicle}): identification {a:.1f}-{b:.1f} s, validation "
+    lines = [f"{', '.join(fit.fits)} from {fit.file} (vehicle {vehicle}): identification {a:.1f}-{b:.1f} s, validation "
              f"{fit.valid_span[0]:.1f}-{fit.valid_span[1]:.1f} s; output error; standard deviations robust to "
              "correlated errors (Newey-West; clustered by window)"]
     lines += [f"  {n}" for n in fit.notes]
@@ -936,7 +989,7 @@ def _dive_text(fit, vehicle: str) -> str:
         if f.refused_dof:
             lines.append(f"{dof}: not identified: {f.refused_dof}")
             continue
-        unit = "m/s" if dof == "heave" else "rad/s"
+        unit = "rad/s" if dof == "yaw" else "m/s"
         lines.append(f"{dof}: {sum(f.samples.values())} samples in {f.windows} windows, speed RMS {f.speed_rms:.3g} "
                      f"max {f.speed_max:.3g} {unit}; residual RMS "
                      + ", ".join(f"{k} {v:.3g}" for k, v in f.rms.items()))
@@ -956,14 +1009,29 @@ def _dive_text(fit, vehicle: str) -> str:
     if fit.prediction:
         from rovlab.ident.dive import HORIZONS, PREDICTION_STEP_S
 
-        lines.append(f"prediction RMSE on the validation segment (steps of {PREDICTION_STEP_S:g} s; identified / file):")
-        head = "".join(f"{f'{k} step' + ('s' if k > 1 else ''):>22s}" for k in HORIZONS)
+        pub = fit.compare is not None and any("published" in r for r in fit.prediction.values())
+        cols = "identified / file" + (f" / published {fit.compare.name}" if pub else "")
+        lines.append(f"prediction RMSE on the validation segment (steps of {PREDICTION_STEP_S:g} s; {cols}):")
+        width = 28 if pub else 22
+        head = "".join(f"{f'{k} step' + ('s' if k > 1 else ''):>{width}s}" for k in HORIZONS)
         lines.append(f"  {'':12s}{head}")
         for out, rows in fit.prediction.items():
-            scale, unit = (1.0, "m") if out == "depth_m" else (180 / math.pi, "deg")
-            cells = "".join(f"{rows['identified'][i] * scale:10.3g} / {rows['file'][i] * scale:<9.3g}"
+            scale, unit = {"heading_rad": (180 / math.pi, "deg"), "u_mps": (1.0, "m/s"), "v_mps": (1.0, "m/s")}.get(
+                out, (1.0, "m"))
+            keys = ("identified", "file") + (("published",) if pub else ())
+            cells = "".join(f"{' / '.join(f'{rows[k][i] * scale:.3g}' for k in keys):>{width}s}"
                             for i in range(len(HORIZONS)))
             lines.append(f"  {out.split('_')[0] + ' [' + unit + ']':12s}{cells}")
+        if pub:
+            lines.append(f"  {fit.compare.note()}")
+        elif compare_arg is not None and compare_arg.strip().lower() == "none":
+            lines.append("  no published parameter set compared (--compare none)")
+        else:
+            from rovlab.ident.published import packaged_sets
+
+            listed = "; ".join(f"{n} for {', '.join(s.vehicles)}" for n, s in packaged_sets().items() if s.vehicles)
+            lines.append(f"  no published parameter set compared: none is listed for {vehicle} (packaged: {listed}); "
+                         "--compare NAME|FILE scores one")
     return "\n".join(lines)
 
 
@@ -983,7 +1051,8 @@ def read_dive_log(path: str | Path, vehicle: Any) -> Any:
     records = read_records(path)
     drop = set(stamp_outliers([r[0] for r in records], 100.0))
     records = [r for i, r in enumerate(records) if i not in drop]
-    kinds = {"depth": "pressure", "heading": "imu", "rate": "imu"}
+    kinds = {"depth": "pressure", "heading": "imu", "rate": "imu", "x": "motion_capture", "y": "motion_capture",
+             "u": "dvl", "v": "dvl"}
     chans = tuple(SimpleNamespace(column=v[0], kind=kinds[k], quantity=v[2])
                   for k, v in dive.sensor_channels(vehicle).items())
     cols = filter_columns(records, vehicle, chans, 0.1, file=str(path))
