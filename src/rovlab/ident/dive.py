@@ -76,15 +76,21 @@ from rovlab.ident.fitting import IdentificationError, significant
 from rovlab.params.vehicle import Vehicle
 
 DOFS = ("heave", "yaw")
-_DOF_INDEX = {"heave": 2, "yaw": 3}
+HORIZONTAL_DOFS = ("surge", "sway")  # when the log carries position or velocity (rovlab.ident.horizontal)
+ALL_DOFS = DOFS + HORIZONTAL_DOFS
+_DOF_INDEX = {"surge": 0, "sway": 1, "heave": 2, "yaw": 3}
 # parameter keys per DOF (the fit's internal names) and how the report and the vehicle file call them
 KEYS = ("added_mass", "linear", "quadratic", "net_buoyancy", "thrust_scale")
 NAMES = {"heave": {"added_mass": "Z_wdot", "linear": "Z_w", "quadratic": "Z_|w|w", "net_buoyancy": "B-W",
                    "thrust_scale": "s_Z"},
-         "yaw": {"added_mass": "N_rdot", "linear": "N_r", "quadratic": "N_|r|r", "thrust_scale": "s_N"}}
+         "yaw": {"added_mass": "N_rdot", "linear": "N_r", "quadratic": "N_|r|r", "thrust_scale": "s_N"},
+         "surge": {"added_mass": "X_udot", "linear": "X_u", "quadratic": "X_|u|u", "thrust_scale": "s_X"},
+         "sway": {"added_mass": "Y_vdot", "linear": "Y_v", "quadratic": "Y_|v|v", "thrust_scale": "s_Y"}}
 UNITS = {"heave": {"added_mass": "kg", "linear": "N s/m", "quadratic": "N s^2/m^2", "net_buoyancy": "N",
                    "thrust_scale": ""},
-         "yaw": {"added_mass": "kg m^2", "linear": "N m s/rad", "quadratic": "N m s^2/rad^2", "thrust_scale": ""}}
+         "yaw": {"added_mass": "kg m^2", "linear": "N m s/rad", "quadratic": "N m s^2/rad^2", "thrust_scale": ""},
+         "surge": {"added_mass": "kg", "linear": "N s/m", "quadratic": "N s^2/m^2", "thrust_scale": ""},
+         "sway": {"added_mass": "kg", "linear": "N s/m", "quadratic": "N s^2/m^2", "thrust_scale": ""}}
 DEFAULT_FREE = ("added_mass", "linear", "quadratic", "net_buoyancy")
 GRID_S = 0.05  # model integration step [s]
 WINDOW_S = 15.0  # multiple-shooting window [s]
@@ -115,7 +121,7 @@ class DofModel:
 
     def values(self) -> dict[str, float]:
         out = {k: float(getattr(self, k)) for k in KEYS}
-        if self.dof == "yaw":
+        if self.dof != "heave":
             out.pop("net_buoyancy")
         return out
 
@@ -128,7 +134,7 @@ class DofModel:
 
 def dof_model(vehicle: Vehicle, dof: str) -> DofModel:
     i = _DOF_INDEX[dof]
-    return DofModel(dof, float(vehicle.mass if dof == "heave" else vehicle.I_zz), float(vehicle.added_mass[i]),
+    return DofModel(dof, float(vehicle.I_zz if dof == "yaw" else vehicle.mass), float(vehicle.added_mass[i]),
                     float(vehicle.damping_linear[i]), float(vehicle.damping_quadratic[i]),
                     float(vehicle.damping_cubic[i]),
                     float(vehicle.buoyancy - vehicle.weight) if dof == "heave" else 0.0, 1.0)
@@ -198,10 +204,13 @@ class DiveData:
 
 def sensor_channels(vehicle: Vehicle) -> dict[str, tuple[str, str, str, float, float]]:
     """Which sensor gives depth, heading and yaw rate: key -> (column, sensor, channel, variance,
-    resolution). Depth: a pressure sensor; heading and yaw rate: an IMU/AHRS, else motion capture."""
+    resolution). Depth: a pressure sensor; heading and yaw rate: an IMU/AHRS, else motion capture;
+    north / east position x, y: a positioning system (kind motion_capture: USBL, motion capture,
+    ArduSub's LOCAL_POSITION_NED); surge / sway velocity u, v: a DVL (bottom track)."""
     out: dict[str, tuple[str, str, str, float, float]] = {}
     wanted = {"depth": (("pressure", "z"),), "heading": (("imu", "psi"), ("motion_capture", "psi")),
-              "rate": (("imu", "r"),)}
+              "rate": (("imu", "r"),), "x": (("motion_capture", "x"),), "y": (("motion_capture", "y"),),
+              "u": (("dvl", "u"),), "v": (("dvl", "v"),)}
     for key, options in wanted.items():
         for kind, ch in options:
             s = next((s for s in vehicle.sensors if s.kind == kind and ch in s.variance), None)
@@ -251,7 +260,9 @@ def dive_from_columns(cols: Mapping[str, np.ndarray], vehicle: Vehicle, *, file:
         raise IdentificationError(f"{file}: no row with the thruster input; expected PWM or tau_Z/tau_N values")
     sens = sensor_channels(vehicle)
     chans: list[Channel] = []
-    for key, dof, kind in (("depth", "heave", "position"), ("heading", "yaw", "position"), ("rate", "yaw", "velocity")):
+    for key, dof, kind in (("depth", "heave", "position"), ("heading", "yaw", "position"), ("rate", "yaw", "velocity"),
+                           ("x", "north", "position"), ("y", "east", "position"), ("u", "surge", "velocity"),
+                           ("v", "sway", "velocity")):
         if key not in sens:
             continue
         col, _, _, var, _ = sens[key]
@@ -440,10 +451,11 @@ def _covariances(prob: _Problem, J: np.ndarray, r: np.ndarray) -> tuple[np.ndarr
     Liang & Zeger 1986) covers any correlation within a window, across channels too, e.g. the drift a random
     force leaves in the integrated depth and heading."""
     g = len(prob.free)
+    nn = getattr(prob, "nuisance", 2)  # initial-state values per window (horizontal: 2 or 4)
     Jg = J[:, :g].copy()
     for k, w in enumerate(prob.windows):
         idx = np.concatenate([s[4] for s in w.samples])
-        Jn = J[idx, g + 2 * k:g + 2 * k + 2]
+        Jn = J[idx, g + nn * k:g + nn * (k + 1)]
         coef, *_ = np.linalg.lstsq(Jn, Jg[idx], rcond=None)
         Jg[idx] -= Jn @ coef
     n = r.size
@@ -549,7 +561,7 @@ class DiveFit:
 
 
 def _manoeuvre(dof: str, key: str, speed_rms: float) -> str:
-    unit = "m/s" if dof == "heave" else "rad/s"
+    unit = "rad/s" if dof == "yaw" else "m/s"
     plan = f"rovlab lab plan-dive --dofs {dof}"
     return {"added_mass": f"quick reversals of the {dof} thrust (holds of 0.5-2 s: accelerations, {plan})",
             "linear": f"long holds at low {dof} speed (below {max(0.5 * speed_rms, 0.02):.2g} {unit}) as well as fast ones "
@@ -561,7 +573,8 @@ def _manoeuvre(dof: str, key: str, speed_rms: float) -> str:
 
 def _hold_text(dof: str) -> str:
     return {"heave": "heave (no depth change to speak of, or no depth column)",
-            "yaw": "yaw (no turning to speak of, or no heading column)"}[dof]
+            "yaw": "yaw (no turning to speak of, or no heading column)",
+            "surge": "surge (no surge speed to speak of)", "sway": "sway (no sway speed to speak of)"}[dof]
 
 
 def fit_dof(data: DiveData, dof: str, start: DofModel, t0: float, t1: float, *,
@@ -793,14 +806,20 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] = DOF
     t_split = a + split * (b - a)
     fits = {}
     for dof in dofs:
+        if dof in HORIZONTAL_DOFS:  # below, together (rovlab.ident.horizontal)
+            continue
         if dof not in DOFS:
-            raise IdentificationError(f"DOF {dof!r}: identification from dives covers {', '.join(DOFS)} (surge and sway "
-                                      "need position or velocity in the log)")
+            raise IdentificationError(f"DOF {dof!r}: identification from dives covers {', '.join(ALL_DOFS)} (surge and "
+                                      "sway need position or velocity in the log)")
         chosen = free.get(dof, DEFAULT_FREE) if isinstance(free, Mapping) else (free or DEFAULT_FREE)
         fits[dof] = fit_dof(data, dof, dof_model(vehicle, dof), a, t_split, free=chosen, max_rel=max_rel)
     kept = tuple(d for d in fits if not fits[d].refused_dof)
     pred = prediction_errors(data, {d: fits[d].model for d in kept}, {d: dof_model(vehicle, d) for d in kept},
                              t_split, b, published=compare.models(vehicle, kept) if compare is not None else None)
+    if any(d in HORIZONTAL_DOFS for d in dofs):
+        from rovlab.ident import horizontal
+
+        fits, pred = horizontal.identify(data, vehicle, dofs, free, a, t_split, b, fits, pred, max_rel=max_rel)
     notes = data.notes
     depth = data.channel("heave", "position")
     if depth is not None and depth.y.size and abs(float(np.median(depth.y))) < 0.3:
@@ -988,7 +1007,9 @@ def hidden_vehicle(vehicle: Vehicle, seed: int, *, spread: float = 0.25, buoyanc
     """A vehicle whose heave and yaw added mass and damping differ from ``vehicle``'s by up to
     +-``spread`` (uniform, each), whose net buoyancy is off by up to +-``buoyancy_n`` N, and whose
     zero linear damping (bluerov2_heavy's yaw: not published) becomes 20 % of the damping at
-    1 m/s or rad/s, so that every coefficient has a truth to find."""
+    1 m/s or rad/s, so that every coefficient has a truth to find. Surge and sway are perturbed
+    the same way from a second stream of the seed (so heave and yaw are those of the seed as
+    before surge and sway were added)."""
     rng = np.random.default_rng(seed)
     am = np.array(vehicle.added_mass, dtype=float)
     lin = np.array(vehicle.damping_linear, dtype=float)
@@ -1000,17 +1021,84 @@ def hidden_vehicle(vehicle: Vehicle, seed: int, *, spread: float = 0.25, buoyanc
         lin[i] *= rng.uniform(1 - spread, 1 + spread)
         quad[i] *= rng.uniform(1 - spread, 1 + spread)
     dv = rng.uniform(-buoyancy_n, buoyancy_n) / (vehicle.water_density * vehicle.gravity)
+    rng_h = np.random.default_rng([seed, 1])
+    for i in (0, 1):
+        am[i] *= rng_h.uniform(1 - spread, 1 + spread)
+        if lin[i] == 0.0:
+            lin[i] = 0.2 * quad[i]
+        lin[i] *= rng_h.uniform(1 - spread, 1 + spread)
+        quad[i] *= rng_h.uniform(1 - spread, 1 + spread)
     return vehicle.with_updates(name=f"{vehicle.name} (hidden, seed {seed})", added_mass=am, damping_linear=lin,
                                 damping_quadratic=quad, displaced_volume=vehicle.displaced_volume + dv)
 
 
 def truth_values(vehicle: Vehicle) -> dict[str, float]:
     out = {}
-    for dof in DOFS:
+    for dof in ALL_DOFS:
         for k, v in dof_model(vehicle, dof).values().items():
             if k != "thrust_scale":
                 out[NAMES[dof][k]] = v
     return out
+
+
+class _HorizontalSensors:
+    """The virtual dive's DVL and / or positioning system and the surge / sway process noise
+    (:func:`fly_plan`), drawn from their own random stream."""
+
+    def __init__(self, model: Vehicle, sens: Mapping[str, tuple[str, str, str, float, float]], seed: int | None,
+                 noise: bool, h: float, psd: float) -> None:
+        self.rng = np.random.default_rng(None if seed is None else [seed, 2])
+        self.h = h
+        self.sens = {k: sens[k] for k in ("x", "y", "u", "v") if k in sens}
+        self.every: dict[str, int] = {}
+        for k, (_, name, _, _, _) in self.sens.items():
+            self.every[k] = max(1, int(round(1.0 / (model.sensor(name).rate_hz * h))))
+        self.sd = {k: (math.sqrt(v[3]) if noise else 0.0) for k, v in self.sens.items()}
+        self.sd_force = math.sqrt(psd / h) if noise else 0.0
+        self.rows: dict[str, list[float]] = {k: [] for k in self.sens}
+        self.dr = [0.0, 0.0]  # dead-reckoned position from the DVL [m]
+        self.fix: list[float] | None = None  # the latest positioning fix [m]
+        self.dvl_every = self.every.get("u", 0)
+        self.notes = [f"{v[0]} at {model.sensor(v[1]).rate_hz:g} Hz (variance {v[3]:.3g})" for v in self.sens.values()]
+
+    def due(self, k: int) -> bool:
+        return any(k % e == 0 for e in self.every.values())
+
+    def position(self) -> tuple[float, float]:
+        """What the guard knows of the position: the positioning system's latest fix, else the DVL's
+        dead reckoning."""
+        if self.fix is not None:
+            return self.fix[0], self.fix[1]
+        return self.dr[0], self.dr[1]
+
+    def sample(self, k: int, x: np.ndarray, heading: float) -> None:
+        """One log row at step k: each sensor's sample if it is due (NaN otherwise)."""
+        got: dict[str, float] = {}
+        for key, state in (("x", 0), ("y", 1), ("u", 4), ("v", 5)):
+            if key not in self.sens:
+                continue
+            val = math.nan
+            if k % self.every[key] == 0:
+                val = float(x[state] + self.sd[key] * self.rng.standard_normal())
+            got[key] = val
+            self.rows[key].append(val)
+        if "x" in got and "y" in got and math.isfinite(got["x"]) and math.isfinite(got["y"]):
+            self.fix = [got["x"], got["y"]]
+        if "u" in got and "v" in got and math.isfinite(got["u"]) and math.isfinite(got["v"]):
+            dt = self.dvl_every * self.h
+            c, s = math.cos(heading), math.sin(heading)
+            self.dr[0] += dt * (c * got["u"] - s * got["v"])
+            self.dr[1] += dt * (s * got["u"] + c * got["v"])
+
+    def force_noise(self, fx: float, fy: float) -> tuple[float, float]:
+        return (fx + self.sd_force * self.rng.standard_normal(), fy + self.sd_force * self.rng.standard_normal())
+
+    def columns(self) -> dict[str, np.ndarray]:
+        return {self.sens[k][0]: np.array(v) for k, v in self.rows.items()}
+
+    def note(self) -> str:
+        return ("; ".join(self.notes) + f"; surge/sway process noise PSD {self.sd_force**2 * self.h:g} N^2/Hz"
+                + ("; the box guard's position dead-reckoned from the DVL" if "x" not in self.sens else ""))
 
 
 @dataclass(frozen=True, eq=False)
@@ -1028,11 +1116,18 @@ class Flight:
 def fly_plan(plan: Any, model: Vehicle, truth: Vehicle, *, seed: int | None = 0, noise: bool = True,
              plant_step_s: float = 0.01, process_psd: Sequence[float] = (1e-2, 1e-6),
              depth_rate_hz: float = 2.0, heading_rate_hz: float = 20.0, pwm_resolution_us: float = 1.0,
-             ahrs_tau_s: float = AHRS_TAU_S) -> Flight:
+             ahrs_tau_s: float = AHRS_TAU_S, process_psd_horizontal: float = 1e-2) -> Flight:
     """Fly ``plan`` (rovlab.ident.plan.DivePlan) on ``truth`` with the allocation and the thrust
     curves of ``model`` turning the wrench into PWM (module docstring). ``noise=False``: no sensor
     or process noise (the planner's nominal flight). ``process_psd``: white force noise on heave
-    [N^2/Hz] and yaw [(N m)^2/Hz] (the packaged bluerov2-heavy-step scenario's values)."""
+    [N^2/Hz] and yaw [(N m)^2/Hz] (the packaged bluerov2-heavy-step scenario's values).
+
+    A surge and sway plan is flown with the heading law and the box guard (rovlab.ident.plan), white
+    force noise of ``process_psd_horizontal`` [N^2/Hz] on surge and sway, and the model vehicle's
+    horizontal sensors at their files' rates and variances: a DVL's bottom-track u, v (the guard's
+    position then dead-reckoned from them and the AHRS heading) and / or a positioning system's
+    x, y (motion_capture kind). Those draws come from a second random stream of the seed, so the
+    heave and yaw of a heave and yaw plan are what they were."""
     from rovlab.allocation.geometry import configuration_matrix
     from rovlab.allocation.solvers import Allocator
     from rovlab.core.angles import wrap as wrap_angle
@@ -1074,12 +1169,19 @@ def fly_plan(plan: Any, model: Vehicle, truth: Vehicle, *, seed: int | None = 0,
     sd_proc = [math.sqrt(process_psd[0] / h), math.sqrt(process_psd[1] / h)] if noise else [0.0, 0.0]
     flyer = plan.flyer()
     z_meas = float(x[2] + lz)
+    horiz = bool(getattr(plan, "horizontal", False))
+    hs = _HorizontalSensors(model, sens, seed, noise, h, process_psd_horizontal) if horiz else None
+    head_last, rate_last = float(wrap_angle(x[3] + ahrs)), 0.0
     guard_steps = 0
     zmin, zmax = x[2], x[2]
     pwm = np.full(len(names), 1500.0)
     for k in range(n_cmd * sub):
         if k % sub == 0:
-            tau, guarded = flyer.step(k // sub, z_meas - lz)
+            if hs is not None:
+                tau, guarded = flyer.step(k // sub, z_meas - lz, heading=head_last, rate=rate_last,
+                                          position=hs.position())
+            else:
+                tau, guarded = flyer.step(k // sub, z_meas - lz)
             guard_steps += int(guarded)
             res = alloc.allocate(np.asarray(tau, dtype=float))
             pwm = res.pwm_us
@@ -1088,7 +1190,7 @@ def fly_plan(plan: Any, model: Vehicle, truth: Vehicle, *, seed: int | None = 0,
             f6 = B_true @ bank_true.force(pwm)
             real = f6[[0, 1, 2, 5]]
         t = k * h
-        if k % depth_every == 0 or k % head_every == 0 or k % sub == 0:
+        if k % depth_every == 0 or k % head_every == 0 or k % sub == 0 or (hs is not None and hs.due(k)):
             rows_t.append(t)
             rows_pwm.append(pwm.copy())
             states.append(np.concatenate([[t], x]))
@@ -1103,12 +1205,17 @@ def fly_plan(plan: Any, model: Vehicle, truth: Vehicle, *, seed: int | None = 0,
                 ahrs = phi * ahrs + sd_psi * math.sqrt(1 - phi * phi) * rng.standard_normal()
                 rows["heading"].append(float(wrap_angle(x[3] + ahrs)))
                 rows["rate"].append(x[7] + sd_r * rng.standard_normal())
+                head_last, rate_last = rows["heading"][-1], rows["rate"][-1]
             else:
                 rows["heading"].append(math.nan)
                 rows["rate"].append(math.nan)
+            if hs is not None:
+                hs.sample(k, x, head_last)
         f[0], f[1] = real[0], real[1]
         f[2] = real[2] + sd_proc[0] * rng.standard_normal()
         f[3] = real[3] + sd_proc[1] * rng.standard_normal()
+        if hs is not None:
+            f[0], f[1] = hs.force_noise(real[0], real[1])
         rk4_inplace(p, x, f, h)
         zmin, zmax = min(zmin, x[2]), max(zmax, x[2])
     cols: dict[str, np.ndarray] = {"time_s": np.array(rows_t)}
@@ -1118,8 +1225,12 @@ def fly_plan(plan: Any, model: Vehicle, truth: Vehicle, *, seed: int | None = 0,
     for key in ("depth", "heading", "rate"):
         if key in sens:
             cols[sens[key][0]] = np.array(rows[key])
+    if hs is not None:
+        cols.update(hs.columns())
     notes = (f"depth {sens['depth'][0]} at {depth_rate_hz:g} Hz (variance {sens['depth'][3]:.3g} m^2, resolution "
              f"{res_z:g} m); AHRS heading at {heading_rate_hz:g} Hz with a Gauss-Markov error ({ahrs_tau_s:g} s); "
              f"PWM quantised to {pwm_resolution_us:g} us; process noise PSD heave {process_psd[0]:g} N^2/Hz, yaw "
              f"{process_psd[1]:g} (N m)^2/Hz" if noise else "no noise (nominal flight)",)
-    return Flight(cols, truth_values(truth), guard_steps * dt, (float(zmin), float(zmax)), notes, np.array(states))
+    extra: tuple[str, ...] = (hs.note(),) if hs is not None else ()
+    return Flight(cols, truth_values(truth), guard_steps * dt, (float(zmin), float(zmax)), notes + extra,
+                  np.array(states))

@@ -31,6 +31,28 @@ long-run variance of such an error, (1 + phi)/(1 - phi) times the file's (phi = 
 so that its 20 Hz samples are not counted as independent. The inverse of the information is the
 Cramér-Rao bound: the smallest covariance any unbiased estimator reaches, and what output error
 reaches in the limit when the model is right.
+
+**Surge and sway** (``--dofs ...,surge,sway``; they need a position sensor -- kind motion_capture
+with x, y: USBL, motion capture, ArduSub's LOCAL_POSITION_NED -- or a DVL in the vehicle file: the
+log must carry position or velocity, and the guard must know where the vehicle is). Body-frame
+forces turn with the heading, and a turning vehicle couples surge and sway through the Coriolis
+terms (M_v v r in surge, -M_u u r in sway). So the plan time-shares: the 40 s excitation periods
+alternate between yaw (the yaw moment excited, no surge or sway force) and horizontal ones (random
+multi-level surge and sway forces, independent of each other, while the yaw excitation is off and
+a weak heading law -- ``heading_gain`` (psi_ref - psi) - ``heading_damping`` r, about a 1 rad/s,
+0.7-damped loop on the file's yaw inertia -- holds the heading the period began with). Heave is
+excited throughout. Without yaw in ``dofs`` every period is horizontal. rovlab.ident.horizontal
+still models the rotation (the logged heading and yaw rate are inputs), so what the heading law
+lets through costs nothing. Levels: log-uniform as for heave, reaching ``surge_speed`` /
+``sway_speed`` by the file's damping, capped at 80 % of ``dof_capacity``. A horizontal guard keeps
+the vehicle in a box of ``box_m`` about its start (a pool is small): a weak position law
+(``position_gain`` N/m towards the start, turned into the body frame by the heading) and, when
+the position leaves the box, the excitation paused and the law four times as strong until the
+vehicle is back in the box's middle half -- as the depth band does for heave. The guard's position
+is the positioning system's, or with only a DVL its velocity integrated with the heading (dead
+reckoning, as ArduSub's EKF gives LOCAL_POSITION_NED from a DVL). Surge and sway holds are cut
+short where the file's model predicts leaving the middle 70 % of the box, and point back to the
+middle when off-centre.
 """
 
 from __future__ import annotations
@@ -46,8 +68,9 @@ import numpy as np
 
 from rovlab.params.vehicle import Vehicle
 
-PLAN_DOFS = ("heave", "yaw")
-_W6 = {"heave": 2, "yaw": 5}
+PLAN_DOFS = ("heave", "yaw", "surge", "sway")
+HORIZONTAL = ("surge", "sway")
+_W6 = {"heave": 2, "yaw": 5, "surge": 0, "sway": 1}
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,6 +91,18 @@ class DivePlan:
     seed: int
     source: str = ""
     settings: Mapping[str, Any] = field(default_factory=dict)
+    # surge and sway (module docstring); None / 0 in a heave and yaw plan
+    X: np.ndarray | None = None  # surge force per command step [N] (the excitation; the position law on top)
+    Y: np.ndarray | None = None  # sway force per command step [N]
+    hold: np.ndarray | None = None  # True where the heading law holds the heading (yaw excitation off)
+    box_m: float = 0.0  # side of the square about the start the vehicle is kept in [m]
+    position_gain: float = 0.0  # [N/m]
+    heading_gain: float = 0.0  # [N m/rad]
+    heading_damping: float = 0.0  # [N m s/rad]
+
+    @property
+    def horizontal(self) -> bool:
+        return self.X is not None and any(d in HORIZONTAL for d in self.dofs)
 
     @property
     def duration_s(self) -> float:
@@ -86,24 +121,73 @@ class Flyer:
         band = plan.depth_max - plan.depth_min
         self.inner = (plan.depth_min + 0.25 * band, plan.depth_max - 0.25 * band)
         self.guarded = False
+        self.h_guarded = False  # outside the box (surge / sway plans)
+        self.origin: tuple[float, float] | None = None
+        self.psi_ref: float | None = None
 
-    def step(self, k: int, depth: float) -> tuple[list[float], bool]:
+    def step(self, k: int, depth: float, *, heading: float | None = None, rate: float | None = None,
+             position: tuple[float, float] | None = None) -> tuple[list[float], bool]:
+        """The wrench [X, Y, Z, N] to command at step ``k`` from the measured depth and, for a surge
+        and sway plan, the measured heading, yaw rate and NED position (x, y); and whether a guard
+        holds the excitation."""
         p = self.plan
         if depth < p.depth_min or depth > p.depth_max:
             self.guarded = True
         elif self.guarded and self.inner[0] <= depth <= self.inner[1]:
             self.guarded = False
+        if not p.horizontal:
+            gain = p.depth_gain * (4.0 if self.guarded else 1.0)
+            exc_z = 0.0 if self.guarded else float(p.Z[k])
+            exc_n = 0.0 if self.guarded else float(p.N[k])
+            lo, hi = p.capacity.get("heave", (-math.inf, math.inf))
+            z = min(max(p.trim_Z + exc_z + gain * (self.mid - depth), 0.95 * lo), 0.95 * hi)
+            return [0.0, 0.0, z, exc_n], self.guarded
+        return self._step_horizontal(k, depth, heading, rate, position)
+
+    def _step_horizontal(self, k: int, depth: float, heading: float | None, rate: float | None,
+                         position: tuple[float, float] | None) -> tuple[list[float], bool]:
+        p = self.plan
+        assert p.X is not None and p.Y is not None and p.hold is not None
+        if heading is None or position is None:
+            raise ValueError("a surge and sway plan is flown with the measured heading and position")
+        if self.origin is None:
+            self.origin = (float(position[0]), float(position[1]))
+        dn, de = position[0] - self.origin[0], position[1] - self.origin[1]
+        half = 0.5 * p.box_m
+        if abs(dn) > half or abs(de) > half:
+            self.h_guarded = True
+        elif self.h_guarded and abs(dn) <= 0.5 * half and abs(de) <= 0.5 * half:
+            self.h_guarded = False
+        guarded = self.guarded or self.h_guarded
         gain = p.depth_gain * (4.0 if self.guarded else 1.0)
-        exc_z = 0.0 if self.guarded else float(p.Z[k])
-        exc_n = 0.0 if self.guarded else float(p.N[k])
+        exc = 0.0 if guarded else 1.0
         lo, hi = p.capacity.get("heave", (-math.inf, math.inf))
-        z = min(max(p.trim_Z + exc_z + gain * (self.mid - depth), 0.95 * lo), 0.95 * hi)
-        return [0.0, 0.0, z, exc_n], self.guarded
+        z = min(max(p.trim_Z + exc * float(p.Z[k]) + gain * (self.mid - depth), 0.95 * lo), 0.95 * hi)
+        if p.hold[k]:
+            if self.psi_ref is None:
+                self.psi_ref = heading
+            err = math.remainder(self.psi_ref - heading, 2.0 * math.pi)
+            n = p.heading_gain * err - p.heading_damping * (rate or 0.0)
+        else:
+            self.psi_ref = None
+            n = exc * float(p.N[k])
+        lo_n, hi_n = p.capacity.get("yaw", (-math.inf, math.inf))
+        n = min(max(n, 0.95 * lo_n), 0.95 * hi_n)
+        kp = p.position_gain * (4.0 if self.h_guarded else 1.0)
+        fn, fe = -kp * dn, -kp * de  # towards the start, NED
+        c, s = math.cos(heading), math.sin(heading)
+        x = exc * float(p.X[k]) + c * fn + s * fe
+        y = exc * float(p.Y[k]) - s * fn + c * fe
+        lo_x, hi_x = p.capacity.get("surge", (-math.inf, math.inf))
+        lo_y, hi_y = p.capacity.get("sway", (-math.inf, math.inf))
+        x = min(max(x, 0.95 * lo_x), 0.95 * hi_x)
+        y = min(max(y, 0.95 * lo_y), 0.95 * hi_y)
+        return [x, y, z, n], guarded
 
 
 def dof_capacity(vehicle: Vehicle) -> dict[str, tuple[float, float]]:
-    """(most negative, most positive) force [N] / moment [N m] the thrusters give in heave and in
-    yaw alone, along the allocation's pseudo-inverse direction within the thrust limits."""
+    """(most negative, most positive) force [N] / moment [N m] the thrusters give in heave, yaw,
+    surge and sway alone, along the allocation's pseudo-inverse direction within the thrust limits."""
     from rovlab.allocation.solvers import Allocator
 
     alloc = Allocator(vehicle, compiled=False)
@@ -140,7 +224,9 @@ def _level(rng: np.random.Generator) -> float:
 def plan_dive(vehicle: Vehicle, dofs: Sequence[str] = PLAN_DOFS, duration_s: float = 300.0, *, seed: int = 0,
               depth_min: float = 1.0, depth_max: float = 3.0, dt: float = 0.1, heave_speed: float = 0.4,
               yaw_rate: float = 1.0, hold_s: tuple[float, float] = (0.5, 3.0), rest_every_s: float = 40.0,
-              rest_s: float = 5.0, depth_gain: float = 4.0, fraction: float = 0.8) -> DivePlan:
+              rest_s: float = 5.0, depth_gain: float = 4.0, fraction: float = 0.8, surge_speed: float = 0.4,
+              sway_speed: float = 0.3, box_m: float = 10.0, position_gain: float = 2.0,
+              heading_bandwidth: float = 1.0) -> DivePlan:
     """A random multi-level excitation of the DOFs (module docstring); ValueError on bad settings."""
     from rovlab.ident.dive import dof_model, simulate
     from rovlab.models.kinetics import hull_height
@@ -148,8 +234,16 @@ def plan_dive(vehicle: Vehicle, dofs: Sequence[str] = PLAN_DOFS, duration_s: flo
     dofs = tuple(dict.fromkeys(dofs))
     bad = [d for d in dofs if d not in PLAN_DOFS]
     if bad or not dofs:
-        raise ValueError(f"--dofs: {', '.join(bad) or 'none'}: dive plans cover {', '.join(PLAN_DOFS)} (surge and sway "
-                         "need position or velocity in the log, which a pressure sensor and an AHRS do not give)")
+        raise ValueError(f"--dofs: {', '.join(bad) or 'none'}: dive plans cover {', '.join(PLAN_DOFS)}")
+    horiz = tuple(d for d in dofs if d in HORIZONTAL)
+    if horiz:
+        _horizontal_sensor(vehicle)
+        for name, x in (("surge speed", surge_speed), ("sway speed", sway_speed), ("box", box_m),
+                        ("position gain", position_gain), ("heading bandwidth", heading_bandwidth)):
+            if not (math.isfinite(x) and x > 0):
+                raise ValueError(f"{name} must be a positive number, got {x}")
+        if box_m < 2.0:
+            raise ValueError(f"box {box_m:g} m: give at least 2 m (the vehicle moves ~1 m per hold at the plan's speeds)")
     for name, x in (("duration", duration_s), ("heave speed", heave_speed), ("yaw rate", yaw_rate), ("dt", dt),
                     ("depth gain", depth_gain)):
         if not (math.isfinite(x) and x > 0):
@@ -185,7 +279,7 @@ def plan_dive(vehicle: Vehicle, dofs: Sequence[str] = PLAN_DOFS, duration_s: flo
         amp["heave"] = min(room, _damping_force(vehicle, 2, heave_speed))
     if "yaw" in dofs:
         amp["yaw"] = min(min(-cap["yaw"][0], cap["yaw"][1]) * fraction, _damping_force(vehicle, 3, yaw_rate))
-    for dof in dofs:
+    for dof in amp:
         if not amp[dof] > 0:
             raise ValueError(f"{vehicle.name}: the vehicle file's {dof} damping is 0, so no amplitude reaches a speed; "
                              "give the file a damping guess")
@@ -224,8 +318,69 @@ def plan_dive(vehicle: Vehicle, dofs: Sequence[str] = PLAN_DOFS, duration_s: flo
     Z, N = np.round(Z, 3), np.round(N, 5)  # as the plan file writes them (rovlab lab dive flies the file)
     settings = {"heave_speed": heave_speed, "yaw_rate": yaw_rate, "hold_s": list(hold_s), "rest_every_s": rest_every_s,
                 "rest_s": rest_s, "fraction": fraction, "amplitude": {d: float(a) for d, a in amp.items()}}
-    return DivePlan(vehicle.name, dofs, dt, Z, N, float(depth_min), float(depth_max), float(mid), float(depth_gain),
-                    trim, cap, int(seed), settings=settings)
+    if not horiz:
+        return DivePlan(vehicle.name, dofs, dt, Z, N, float(depth_min), float(depth_max), float(mid),
+                        float(depth_gain), trim, cap, int(seed), settings=settings)
+    # surge and sway (module docstring): a second random stream, so heave and yaw keep their sequences
+    period = rest_every_s + rest_s if rest_every_s > 0 else 45.0
+    cycle = np.floor(t / period + 1e-9).astype(int)
+    hold = (cycle % 2 == 1) if "yaw" in dofs else np.ones(n, dtype=bool)
+    N[hold] = 0.0
+    rng_h = np.random.default_rng([seed, 1])
+    XY = {"surge": np.zeros(n), "sway": np.zeros(n)}
+    speeds = {"surge": surge_speed, "sway": sway_speed}
+    for dof in horiz:
+        i = _W6[dof]
+        amp[dof] = min(min(-cap[dof][0], cap[dof][1]) * fraction, _damping_force(vehicle, i, speeds[dof]))
+        if not amp[dof] > 0:
+            raise ValueError(f"{vehicle.name}: the vehicle file's {dof} damping is 0, so no amplitude reaches a speed; "
+                             "give the file a damping guess")
+        model = dof_model(vehicle, dof)
+        pos, vel = 0.0, 0.0
+        lim = 0.35 * box_m
+        k = 0
+        while k < n:
+            m = max(1, int(round(rng_h.uniform(*hold_s) / dt)))
+            sign = rng_h.choice((-1.0, 1.0))
+            if abs(pos) > box_m / 6:
+                sign = -1.0 if pos > 0 else 1.0
+            level = sign * amp[dof] * _level(rng_h)
+            for j in range(k, min(k + m, n)):
+                on = hold[j] and not rest[j]
+                f = (level if on else 0.0) - position_gain * pos
+                ps, vs = simulate(model, [f, f], 0.5 * dt, pos, vel)
+                pos, vel = ps[-1], vs[-1]
+                XY[dof][j] = level if on else 0.0
+                if on and ((pos > lim and level > 0) or (pos < -lim and level < 0)):
+                    k = j + 1
+                    break
+            else:
+                k = min(k + m, n)
+        XY[dof] = np.round(XY[dof], 3)
+    inertia = float(vehicle.I_zz - vehicle.added_mass[3])
+    settings |= {"surge_speed": surge_speed, "sway_speed": sway_speed, "heading_bandwidth": heading_bandwidth,
+                 "amplitude": {d: float(a) for d, a in amp.items()}}
+    return DivePlan(vehicle.name, dofs, dt, Z, np.round(N, 5), float(depth_min), float(depth_max), float(mid),
+                    float(depth_gain), trim, cap, int(seed), settings=settings, X=XY["surge"], Y=XY["sway"], hold=hold,
+                    box_m=float(box_m), position_gain=float(position_gain),
+                    heading_gain=round(inertia * heading_bandwidth**2, 4),
+                    heading_damping=round(2.0 * 0.7 * heading_bandwidth * inertia, 4))
+
+
+def _horizontal_sensor(vehicle: Vehicle) -> str:
+    """'position' or 'dvl': what tells a surge / sway plan where the vehicle is; ValueError naming
+    the vehicle and the sensor needed when it has neither."""
+    from rovlab.ident.dive import sensor_channels
+
+    sens = sensor_channels(vehicle)
+    if "x" in sens and "y" in sens:
+        return "position"
+    if "u" in sens and "v" in sens:
+        return "dvl"
+    raise ValueError(f"{vehicle.name}: surge and sway need position or velocity in the log and a position for the box "
+                     "guard, and the vehicle file has no such sensor; add a [[sensors]] of kind motion_capture with x "
+                     "and y (USBL, motion capture, ArduSub's LOCAL_POSITION_NED) or of kind dvl with u and v (bottom "
+                     "track, e.g. the packaged bluerov2_heavy_dvl)")
 
 
 # --------------------------------------------------------------------------------------------
@@ -265,6 +420,8 @@ def expected_sigmas(vehicle: Vehicle, plan: DivePlan, *, split: float = 0.7,
     t1 = a + split * (b - a)
     out: list[Expected] = []
     for dof in plan.dofs:
+        if dof in HORIZONTAL:
+            continue
         start = dive.dof_model(vehicle, dof)
         keys = [k for k in dive.KEYS if k in free and not (dof == "yaw" and k == "net_buoyancy")]
         prob = dive._Problem(data, dof, start, keys, a, t1)
@@ -274,6 +431,18 @@ def expected_sigmas(vehicle: Vehicle, plan: DivePlan, *, split: float = 0.7,
         cov = np.linalg.pinv(J.T @ J)
         for i, k in enumerate(keys):
             out.append(Expected(dof, k, dive.NAMES[dof][k], dive.UNITS[dof][k], float(getattr(start, k)),
+                                float(math.sqrt(max(cov[i, i], 0.0)))))
+    horiz = [d for d in plan.dofs if d in HORIZONTAL]
+    if horiz:  # surge and sway together, as rovlab.ident.horizontal fits them
+        from rovlab.ident import horizontal
+
+        starts = {d: dive.dof_model(vehicle, d) for d in HORIZONTAL}
+        hkeys = [(d, k) for d in horiz for k in dive.KEYS if k in free and k != "net_buoyancy"]
+        hp = horizontal.HorizontalProblem(data, starts, hkeys, a, t1)
+        J = hp.jacobian(hp.initial(), hp.sigma)
+        cov = np.linalg.pinv(J.T @ J)
+        for i, (d, k) in enumerate(hkeys):
+            out.append(Expected(d, k, dive.NAMES[d][k], dive.UNITS[d][k], float(getattr(starts[d], k)),
                                 float(math.sqrt(max(cov[i, i], 0.0)))))
     return out
 
@@ -289,6 +458,10 @@ def write_plan(path: str | Path, plan: DivePlan, expected: Sequence[Expected] = 
     from rovlab.core.files import atomic_write_text
 
     change = np.flatnonzero(np.r_[True, (np.diff(plan.Z) != 0) | (np.diff(plan.N) != 0)])
+    if plan.horizontal:
+        assert plan.X is not None and plan.Y is not None and plan.hold is not None
+        change = np.flatnonzero(np.r_[True, (np.diff(plan.Z) != 0) | (np.diff(plan.N) != 0) | (np.diff(plan.X) != 0)
+                                      | (np.diff(plan.Y) != 0) | (np.diff(plan.hold.astype(int)) != 0)])
     doc = tomlkit.document()
     doc.add(tomlkit.comment("rovlab dive plan: an excitation manoeuvre for rovlab identify dive (docs/identification.md)"))
     doc.add(tomlkit.comment("the wrench [Z N, N m] from each time t_s on, on top of the trim and the depth law"))
@@ -306,6 +479,13 @@ def write_plan(path: str | Path, plan: DivePlan, expected: Sequence[Expected] = 
     g["trim_Z"] = round(plan.trim_Z, 6)
     g["capacity_Z"] = [round(x, 4) for x in plan.capacity.get("heave", (0.0, 0.0))]
     g["capacity_N"] = [round(x, 4) for x in plan.capacity.get("yaw", (0.0, 0.0))]
+    if plan.horizontal:
+        g["box_m"] = plan.box_m
+        g["position_gain"] = plan.position_gain
+        g["heading_gain"] = plan.heading_gain
+        g["heading_damping"] = plan.heading_damping
+        g["capacity_X"] = [round(x, 4) for x in plan.capacity.get("surge", (0.0, 0.0))]
+        g["capacity_Y"] = [round(x, 4) for x in plan.capacity.get("sway", (0.0, 0.0))]
     doc["guard"] = g
     s = tomlkit.table()
     for k, v in plan.settings.items():
@@ -315,6 +495,13 @@ def write_plan(path: str | Path, plan: DivePlan, expected: Sequence[Expected] = 
     e["t_s"] = [round(float(x), 6) for x in change * plan.dt]
     e["Z"] = [round(float(x), 3) for x in plan.Z[change]]
     e["N"] = [round(float(x), 5) for x in plan.N[change]]
+    if plan.horizontal:
+        assert plan.X is not None and plan.Y is not None and plan.hold is not None
+        e.add(tomlkit.comment("X, Y: surge and sway force [N] on top of the position law; hold: 1 where the heading law "
+                              "holds the heading (the yaw excitation off)"))
+        e["X"] = [round(float(x), 3) for x in plan.X[change]]
+        e["Y"] = [round(float(x), 3) for x in plan.Y[change]]
+        e["hold"] = [int(x) for x in plan.hold[change]]
     doc["excitation"] = e
     if expected:
         ex = tomlkit.aot()
@@ -355,6 +542,14 @@ def read_plan(path: str | Path) -> DivePlan:
     trim = g.number("trim_Z", lo=-1e4, hi=1e4, what="N")
     capz = g.vector("capacity_Z", 2)
     capn = g.vector("capacity_N", 2)
+    horiz = any(d in HORIZONTAL for d in dofs)
+    if horiz:
+        box = g.number("box_m", positive=True, hi=1e4, what="m")
+        pgain = g.number("position_gain", nonnegative=True, hi=1e4, what="N/m")
+        hgain = g.number("heading_gain", nonnegative=True, hi=1e4, what="N m/rad")
+        hdamp = g.number("heading_damping", nonnegative=True, hi=1e4, what="N m s/rad")
+        capx = g.vector("capacity_X", 2)
+        capy = g.vector("capacity_Y", 2)
     g.finish()
     settings = top.table("settings", required=False)
     settings_data = {k: settings.raw(k) for k in list(settings.data)}  # informative only
@@ -362,6 +557,8 @@ def read_plan(path: str | Path) -> DivePlan:
     ts = e.vector("t_s")
     zs = e.vector("Z")
     ns = e.vector("N")
+    if horiz:
+        xs, ys, hs = e.vector("X"), e.vector("Y"), e.vector("hold")
     e.finish()
     top.raw("expected", None)  # informative only (what plan-dive expected)
     top.finish()
@@ -371,12 +568,21 @@ def read_plan(path: str | Path) -> DivePlan:
         col.add("excitation", f"{ts.size}, {zs.size}, {ns.size} values", "t_s, Z and N of one length")
     elif ts.size and (np.any(np.diff(ts) <= 0) or ts[0] != 0.0):
         col.add("excitation.t_s", "not increasing from 0", "times increasing from 0")
+    if horiz and ts.size and not (ts.size == xs.size == ys.size == hs.size):
+        col.add("excitation", f"{ts.size}, {xs.size}, {ys.size}, {hs.size} values", "t_s, X, Y and hold of one length")
+    elif horiz and hs.size and not np.all((hs == 0) | (hs == 1)):
+        col.add("excitation.hold", "values other than 0 and 1", "0 or 1 (1: the heading law holds the heading)")
     col.raise_if_any("dive plan")
     n = int(round(duration / dt))
     tk = dt * np.arange(n)
     idx = np.searchsorted(ts, tk + 1e-9, side="right") - 1
     Z = zs[np.maximum(idx, 0)]
     N = ns[np.maximum(idx, 0)]
-    return DivePlan(vehicle, dofs, dt, Z, N, dmin, dmax, start, gain, trim,
-                    {"heave": (float(capz[0]), float(capz[1])), "yaw": (float(capn[0]), float(capn[1]))}, seed, source,
-                    settings_data)
+    cap = {"heave": (float(capz[0]), float(capz[1])), "yaw": (float(capn[0]), float(capn[1]))}
+    if not horiz:
+        return DivePlan(vehicle, dofs, dt, Z, N, dmin, dmax, start, gain, trim, cap, seed, source, settings_data)
+    cap |= {"surge": (float(capx[0]), float(capx[1])), "sway": (float(capy[0]), float(capy[1]))}
+    i = np.maximum(idx, 0)
+    return DivePlan(vehicle, dofs, dt, Z, N, dmin, dmax, start, gain, trim, cap, seed, source, settings_data,
+                    X=xs[i], Y=ys[i], hold=hs[i] > 0.5, box_m=box, position_gain=pgain, heading_gain=hgain,
+                    heading_damping=hdamp)
