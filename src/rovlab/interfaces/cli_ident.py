@@ -157,7 +157,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", metavar="LOG")
     p.add_argument("--vehicle", required=True, metavar="NAME|FILE",
                    help="the vehicle file to start from (thrust curves, sensors, rigid-body mass and inertia)")
-    p.add_argument("--dofs", default="heave,yaw", help="DOFs to identify (default heave,yaw)")
+    p.add_argument("--dofs", help="DOFs to identify, from heave, yaw, surge, sway (default heave,yaw, and surge,sway "
+                                   "when the log carries position or velocity: a DVL's u, v or a position's x, y)")
     p.add_argument("--free", default="added_mass,linear,quadratic,net_buoyancy",
                    help="parameters to estimate per DOF, from added_mass, linear, quadratic, net_buoyancy, "
                         "thrust_scale (default added_mass,linear,quadratic,net_buoyancy; added_mass and thrust_scale "
@@ -249,7 +250,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "values, with its sensors' noise) before anything is flown.")
     p.add_argument("--vehicle", default="bluerov2_heavy", metavar="NAME|FILE",
                    help="packaged name or TOML file (bluerov2_heavy)")
-    p.add_argument("--dofs", default="heave,yaw", help="DOFs to excite (default heave,yaw)")
+    p.add_argument("--dofs", default="heave,yaw", help="DOFs to excite, from heave, yaw, surge, sway (default heave,yaw; "
+                                                       "surge and sway need a DVL or a position sensor in the vehicle "
+                                                       "file)")
     p.add_argument("--duration", type=_positive, default=300.0, metavar="S", help="length of the manoeuvre (300 s)")
     p.add_argument("--depth-min", type=_positive, default=1.0, metavar="M", help="top of the depth band (1 m)")
     p.add_argument("--depth-max", type=_positive, default=3.0, metavar="M", help="bottom of the depth band (3 m)")
@@ -257,6 +260,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="heave speed the largest level reaches (0.4 m/s)")
     p.add_argument("--yaw-rate", type=_positive, default=60.0, metavar="DEG/S",
                    help="yaw rate the largest level reaches (60 deg/s)")
+    p.add_argument("--surge-speed", type=_positive, default=0.4, metavar="M/S",
+                   help="surge speed the largest level reaches (0.4 m/s)")
+    p.add_argument("--sway-speed", type=_positive, default=0.3, metavar="M/S",
+                   help="sway speed the largest level reaches (0.3 m/s)")
+    p.add_argument("--box-m", type=_positive, default=10.0, metavar="M",
+                   help="surge/sway: side of the square about the start the vehicle is kept in (10 m)")
     p.add_argument("--seed", type=_seed, default=0, help="random seed of the sequence (0)")
     p.add_argument("--out", required=True, metavar="PLAN.toml", help="plan file to write")
     p.add_argument("--json", action="store_true", help="print the plan's summary and expected sigmas as JSON")
@@ -829,7 +838,8 @@ def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
     v = _lab_vehicle(args)
     plan = _lab_call(lambda: dive_plan.plan_dive(
         v, _dofs_arg(args.dofs), args.duration, seed=args.seed, depth_min=args.depth_min, depth_max=args.depth_max,
-        heave_speed=args.heave_speed, yaw_rate=math.radians(args.yaw_rate)))
+        heave_speed=args.heave_speed, yaw_rate=math.radians(args.yaw_rate), surge_speed=args.surge_speed,
+        sway_speed=args.sway_speed, box_m=args.box_m))
     expected = dive_plan.expected_sigmas(v, plan)
     command = (f"rovlab lab plan-dive --vehicle {args.vehicle} --dofs {','.join(plan.dofs)} --duration {args.duration:g} "
                f"--seed {args.seed} ({_dt.date.today().isoformat()})")
@@ -853,7 +863,7 @@ def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
           f"{plan.depth_min:g}-{plan.depth_max:g} m")
     for dof, a in amp.items():
         lo, hi = plan.capacity[dof]
-        unit = "N" if dof == "heave" else "N m"
+        unit = "N m" if dof == "yaw" else "N"
         print(f"  {dof}: levels up to {a:.3g} {unit} (thrusters give {lo:.3g} .. {hi:.3g} {unit} in {dof} alone)")
     print("expected standard deviations (Cramér-Rao, at the vehicle file's values, first 70 % of the log):")
     print(f"  {'parameter':10s} {'guess':>12s} {'sigma':>12s} {'sigma %':>9s}")
@@ -861,6 +871,10 @@ def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
         pct = f"{e.percent:8.2f}%" if math.isfinite(e.percent) else "        -"
         print(f"  {e.name:10s} {e.guess:12.5g} {e.sigma:12.3g} {pct}  {e.unit}")
     print("  (the heading's AHRS errors counted as correlated over 0.5 s; a guess of 0 has no percentage)")
+    if plan.horizontal:
+        print(f"  surge/sway: in every other 40 s period, the yaw excitation off and the heading held (gain "
+              f"{plan.heading_gain:g} N m/rad, damping {plan.heading_damping:g} N m s/rad); box {plan.box_m:g} m about "
+              f"the start (position law {plan.position_gain:g} N/m)")
     print(f"next: {nxt}")
     return 0
 
@@ -894,11 +908,11 @@ def _cmd_dive(args: argparse.Namespace) -> int:
 
     if not 0.2 <= args.split <= 0.95:
         raise _user_error(f"--split must be within 0.2 .. 0.95 (the share of the log used to identify), got {args.split:g}")
-    dofs = _dofs_arg(args.dofs)
-    bad = [d for d in dofs if d not in dive.DOFS]
-    if bad or not dofs:
-        raise _user_error(f"--dofs {args.dofs}: identification from dives covers {', '.join(dive.DOFS)} (surge and sway "
-                          "need position or velocity in the log)")
+    dofs = _dofs_arg(args.dofs) if args.dofs is not None else None
+    bad = [d for d in dofs or () if d not in dive.ALL_DOFS]
+    if bad or dofs == []:
+        raise _user_error(f"--dofs {args.dofs}: identification from dives covers {', '.join(dive.ALL_DOFS)} (surge and "
+                          "sway need position or velocity in the log)")
     free = _dofs_arg(args.free)
     unknown = [k for k in free if k not in dive.KEYS]
     if unknown or not free:
@@ -909,6 +923,10 @@ def _cmd_dive(args: argparse.Namespace) -> int:
         data = _run(args.file, lambda: read_dive_log(args.file, v))
     except (ValueError, RuntimeError) as exc:  # rovlab.interfaces.mavlink.logs.LogError, a missing pymavlink
         raise _user_error(str(exc)) from None
+    if dofs is None:
+        from rovlab.ident.horizontal import default_dofs
+
+        dofs = list(default_dofs(data))
     compare = _compare_set(args.compare, v)
     fit = _run(args.file, lambda: dive.identify_dive(data, v, dofs=dofs, free=free, split=args.split, compare=compare))
     updated = None
@@ -963,7 +981,7 @@ def _dive_figure(fit: Any, data: Any, vehicle: Any, path: Path) -> Any:
 
 def _dive_text(fit, vehicle: str, compare_arg: str | None = None) -> str:
     a, b = fit.ident_span
-    lines = [f"heave and yaw from {fit.file} (vehicle {vehicle}): identification {a:.1f}-{b:.1f} s, validation "
+    lines = [f"{', '.join(fit.fits)} from {fit.file} (vehicle {vehicle}): identification {a:.1f}-{b:.1f} s, validation "
              f"{fit.valid_span[0]:.1f}-{fit.valid_span[1]:.1f} s; output error; standard deviations robust to "
              "correlated errors (Newey-West; clustered by window)"]
     lines += [f"  {n}" for n in fit.notes]
@@ -971,7 +989,7 @@ def _dive_text(fit, vehicle: str, compare_arg: str | None = None) -> str:
         if f.refused_dof:
             lines.append(f"{dof}: not identified: {f.refused_dof}")
             continue
-        unit = "m/s" if dof == "heave" else "rad/s"
+        unit = "rad/s" if dof == "yaw" else "m/s"
         lines.append(f"{dof}: {sum(f.samples.values())} samples in {f.windows} windows, speed RMS {f.speed_rms:.3g} "
                      f"max {f.speed_max:.3g} {unit}; residual RMS "
                      + ", ".join(f"{k} {v:.3g}" for k, v in f.rms.items()))
@@ -1033,7 +1051,8 @@ def read_dive_log(path: str | Path, vehicle: Any) -> Any:
     records = read_records(path)
     drop = set(stamp_outliers([r[0] for r in records], 100.0))
     records = [r for i, r in enumerate(records) if i not in drop]
-    kinds = {"depth": "pressure", "heading": "imu", "rate": "imu"}
+    kinds = {"depth": "pressure", "heading": "imu", "rate": "imu", "x": "motion_capture", "y": "motion_capture",
+             "u": "dvl", "v": "dvl"}
     chans = tuple(SimpleNamespace(column=v[0], kind=kinds[k], quantity=v[2])
                   for k, v in dive.sensor_channels(vehicle).items())
     cols = filter_columns(records, vehicle, chans, 0.1, file=str(path))
