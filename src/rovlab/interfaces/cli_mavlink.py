@@ -50,6 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                                   "the estimated heading when engaged)")
     b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: Ctrl-C)")
     b.add_argument("--status-every", type=float, default=2.0, help="print the estimate every N s (0: never)")
+    add_fly_arguments(b)
     b.set_defaults(func=_cmd_bridge)
 
     r = cmds.add_parser("record", help="record a vehicle's MAVLink telemetry to MCAP (a listener: sends nothing)")
@@ -92,6 +93,70 @@ def add_bridge_arguments(p: argparse.ArgumentParser, *, connect_default: str = "
     p.add_argument("--trust-vehicle-file", action="store_true",
                    help="command even when the vehicle's own parameters (frame, MOT_n_DIRECTION, PWM range) disagree "
                         "with the vehicle file (default: stop before commanding anything, exit 2)")
+
+
+def add_fly_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of flying a dive plan (``--fly``), shared with ``rovlab ros2 node``."""
+    from rovlab.interfaces.node.flight import GUARD_RANGES, FlightGuards
+
+    d = FlightGuards()
+    r = GUARD_RANGES
+    p.add_argument("--fly", metavar="PLAN", default=None,
+                   help="fly this dive plan (rovlab lab plan-dive) in MANUAL once armed at its start depth, with depth "
+                        "and heading guards; abort to neutral on a guard, lost telemetry or pilot input; then stop "
+                        "(exit 1 if aborted). Record it with --record; docs/identification.md 'Flying a plan'")
+    p.add_argument("--fly-guard-depth-margin", type=float, default=d.depth_margin_m, metavar="M",
+                   help=f"abort when the depth leaves the plan's band by more than this [m] (default "
+                        f"{d.depth_margin_m:g}, {r['depth_margin_m'][0]:g} .. {r['depth_margin_m'][1]:g})")
+    p.add_argument("--fly-guard-turns", type=float, default=d.turns, metavar="N",
+                   help=f"abort beyond this many turns either way from the start heading (default {d.turns:g}, "
+                        f"{r['turns'][0]:g} .. {r['turns'][1]:g}; a tether winds up)")
+    p.add_argument("--fly-guard-yaw-rate-deg", type=float, default=None, metavar="DEG_S",
+                   help="abort beyond this yaw rate [deg/s] (default twice the plan's yaw rate, at least 57.3; "
+                        f"{math.degrees(r['yaw_rate_rad_s'][0]):.1f} .. {math.degrees(r['yaw_rate_rad_s'][1]):.0f})")
+    p.add_argument("--fly-start-tolerance", type=float, default=d.start_tolerance_m, metavar="M",
+                   help=f"start the plan within this distance of its start depth [m] (default {d.start_tolerance_m:g}, "
+                        f"{r['start_tolerance_m'][0]:g} .. {r['start_tolerance_m'][1]:g})")
+
+
+def load_flight(args: argparse.Namespace, vehicle_name: str) -> tuple[Any, Any] | None:
+    """(plan, guards) of the --fly options (None without --fly); UserError / ConfigError (exit 2)
+    for a bad plan file or guard, each named with its value and what was expected."""
+    from rovlab.ident.plan import read_plan
+    from rovlab.interfaces.cli import UserError
+    from rovlab.interfaces.node.flight import FlightGuards
+
+    if args.fly is None:
+        return None
+    for name in ("fly_guard_depth_margin", "fly_guard_turns", "fly_guard_yaw_rate_deg", "fly_start_tolerance"):
+        v = getattr(args, name)
+        if v is not None and not math.isfinite(v):
+            raise UserError(f"--{name.replace('_', '-')} must be a finite number, got {v}")
+    rate = args.fly_guard_yaw_rate_deg
+    try:
+        guards = FlightGuards(depth_margin_m=args.fly_guard_depth_margin, turns=args.fly_guard_turns,
+                              yaw_rate_rad_s=None if rate is None else math.radians(rate),
+                              start_tolerance_m=args.fly_start_tolerance).validated()
+    except ValueError as exc:
+        option = {"depth_margin_m": "--fly-guard-depth-margin", "turns": "--fly-guard-turns",
+                  "yaw_rate_rad_s": "--fly-guard-yaw-rate-deg (in rad/s here)",
+                  "start_tolerance_m": "--fly-start-tolerance"}
+        text = str(exc)
+        for key, opt in option.items():
+            text = text.replace(f"flight guard {key}", opt)
+        raise UserError(text) from None
+    try:
+        plan = read_plan(args.fly)
+    except OSError as exc:
+        raise UserError(f"--fly {args.fly}: cannot read it: {exc.strerror or exc}") from None
+    if plan.vehicle != vehicle_name:
+        raise UserError(f"--fly {args.fly}: the plan is for vehicle {plan.vehicle!r}, this is {vehicle_name!r}: its trim "
+                        f"and thrust limits are another vehicle's (rovlab lab plan-dive --vehicle {vehicle_name} plans "
+                        "one for it)")
+    if not plan.depth_min <= plan.start_depth <= plan.depth_max:
+        raise UserError(f"--fly {args.fly}: guard.start_depth = {plan.start_depth:g} m is outside the plan's depth band "
+                        f"{plan.depth_min:g} .. {plan.depth_max:g} m")
+    return plan, guards
 
 
 def make_bridge(args: argparse.Namespace, log: Any) -> Any:
@@ -316,17 +381,31 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
         raise UserError("--heading-deg needs --depth (the controller holds both)")
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be > 0 s, got {args.duration}")
+    if args.fly is not None and args.depth is not None:
+        raise UserError("--fly and --depth: the plan brings the vehicle to its own start depth (give one of them)")
 
     def log(text: str) -> None:
         print(f"rovlab mavlink bridge: {text}", file=sys.stderr, flush=True)
 
+    from rovlab.params.vehicle import load_vehicle
+
+    flight = load_flight(args, load_vehicle(args.vehicle).name) if args.fly is not None else None
     bridge = make_bridge(args, log)
     if args.depth is not None:
         bridge.set_reference(z=args.depth, psi=None if args.heading_deg is None else math.radians(args.heading_deg))
+    doing = "holding " + format(args.depth, "g") + " m" if args.depth is not None else "estimating only"
+    if flight is not None:
+        try:
+            bridge.fly(*flight)
+        except ValueError as exc:
+            bridge.close()
+            raise UserError(f"--fly {args.fly}: {exc}") from None
+        doing = f"flying {args.fly} once armed in MANUAL at {flight[0].start_depth:g} m"
+        if not args.record:
+            log("--fly without --record: nothing of the flight is recorded here (rovlab identify dive needs a log)")
     _stop_on_signals(bridge.stop)
     print(f"rovlab mavlink bridge: {bridge.core.vehicle.name}/{bridge.core.config.name} on {args.connect} "
-          f"({'holding ' + format(args.depth, 'g') + ' m' if args.depth is not None else 'estimating only'}; "
-          "Ctrl-C stops)", flush=True)
+          f"({doing}; Ctrl-C stops)", flush=True)
     thread = threading.Thread(target=bridge.run, kwargs={"duration_s": args.duration}, daemon=True)
     thread.start()
     next_print = time.monotonic() + args.status_every if args.status_every > 0 else math.inf
@@ -346,10 +425,19 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
                                                            else "not holding")
             print(f"t={o.t:7.1f} s  z={o.x[0]:.3f} m{predicted}  psi={math.degrees(o.x[1]):6.1f} deg  "
                   f"tau_Z={o.tau[2]:6.2f} N  sensors={o.sensor_status}  "
-                  f"{'FAILSAFE ' if bridge.failsafe else ''}{'armed' if bridge.armed else 'disarmed'}, {held}",
-                  flush=True)
+                  f"{'FAILSAFE ' if bridge.failsafe else ''}{'armed' if bridge.armed else 'disarmed'}, {held}"
+                  + (f", flight {bridge.flight.flight.state} {bridge.flight.flight.duration_s:.0f} s"
+                     if bridge.flight is not None else ""), flush=True)
     c = bridge.counts
     print(f"rovlab mavlink bridge: stopped ({c['received']} messages in, {c['commands']} commands out, "
           f"{c['failsafes']} telemetry failsafes)" + (f"; recording: {args.record}" if args.record else ""),
           file=sys.stderr, flush=True)
-    return bridge.exit_code  # 2: the vehicle file disagreed with the vehicle's parameters (said above)
+    if bridge.flight is not None:
+        f = bridge.flight.flight
+        if not f.ended:  # stopped (Ctrl-C, --duration) before the plan's end
+            f.abort("the bridge was stopped before the plan's end" if f.active else "the bridge was stopped before the "
+                    "flight started")
+            log(("ABORTED TO NEUTRAL: " if f.steps else "") + f.summary())
+            bridge.exit_code = bridge.exit_code or 1
+    # 2: the vehicle file disagreed with the vehicle's parameters (said above); 1: a flight aborted
+    return bridge.exit_code

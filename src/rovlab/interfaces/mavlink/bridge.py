@@ -84,6 +84,7 @@ _PARAM_TRIES = 10  # requests (one a second) before the bridge says what the veh
 GAIN_RANGE = (0.1, 1.0)
 THROTTLE_GAIN_RANGE = (0.5, 4.0)
 _STREAMS = {"ATTITUDE": 30, "SCALED_PRESSURE2": 137, "SERVO_OUTPUT_RAW": 36}  # MAVLink message ids
+POSITION_STREAM = ("LOCAL_POSITION_NED", 32)  # asked for too when the filter fuses a position (DP)
 RATE_WINDOW_S = 2.0  # a stream's rate is measured over this long, from this long after asking
 RATE_TOLERANCE = 0.75  # below this share of the rate asked for, the bridge asks again
 RATE_ASKS = 3  # requests in a row without the rate before the bridge says it cannot get it
@@ -93,6 +94,9 @@ COMMAND_MODES = ("manual_control", "rc_override")
 # a depth the pressure sensor can read: 2 m above the surface is 200 hPa below the surface pressure
 # (more than any weather change); 1100 m is deeper than any Blue Robotics sensor reads (Bar100: 1000 m)
 PLAUSIBLE_DEPTH_M = (-2.0, 1100.0)
+# a horizontal position (LOCAL_POSITION_NED x, y: north/east of the EKF origin, set where the vehicle's
+# position was first known) a small ROV on a tether can be at: 10 km from it either way
+PLAUSIBLE_POSITION_M = 10_000.0
 DEPTH_LOST_REPEAT_S = 10.0  # a repeating message (depth sensor lost, back, hold resumed) is said at most this often
 
 
@@ -165,14 +169,25 @@ class MavlinkBridge:
                                        "failsafes": 0, "rate_requests": 0, "rate_resets": 0, "rate_failures": 0,
                                        "implausible_depth": 0, "depth_lost": 0}
         # the telemetry rates we need: arrivals, when we last asked, requests in a row without the rate
-        self.rate_wanted = {name: 1.0 / self.core.h for name in _STREAMS}
-        self.rates: dict[str, float | None] = dict.fromkeys(_STREAMS)  # measured [Hz]; None before a full window
+        # dynamic positioning: the controller holds x and y, on the position channels the filter fuses
+        # (a vehicle-file sensor of kind motion_capture, fed by LOCAL_POSITION_NED / VISION_POSITION_ESTIMATE)
+        self.dp = "x" in self.core.references
+        self._position_channels = [j for j, c in enumerate(self.core.channels) if c.quantity in ("x", "y")]
+        self._streams = dict(_STREAMS)
+        if self._position_channels:
+            self._streams[POSITION_STREAM[0]] = POSITION_STREAM[1]
+        self.position_problem: str | None = None  # the position's problem now (None: none needed, or fused)
+        self._last_bad_position: str | None = None
+        self._position_seen = False  # a position sample was fused
+        self.counts["implausible_position"] = 0
+        self.rate_wanted = {name: 1.0 / self.core.h for name in self._streams}
+        self.rates: dict[str, float | None] = dict.fromkeys(self._streams)  # measured [Hz]; None before a full window
         self.rate_short: set[str] = set()  # streams arriving below RATE_TOLERANCE of the rate wanted
-        self._arrivals: dict[str, collections.deque[float]] = {n: collections.deque(maxlen=1000) for n in _STREAMS}
+        self._arrivals: dict[str, collections.deque[float]] = {n: collections.deque(maxlen=1000) for n in self._streams}
         self._asked_at: dict[str, float] = {}
-        self._rate_asks = dict.fromkeys(_STREAMS, 0)
+        self._rate_asks = dict.fromkeys(self._streams, 0)
         self._said_cannot: set[str] = set()  # streams said to be out of reach in their current episode
-        self._resets = dict.fromkeys(_STREAMS, 0)
+        self._resets = dict.fromkeys(self._streams, 0)
         self._armed_by_us = False
         self._due: dict[str, float] = {"heartbeat": 0.0, "command": 0.0, "params": 0.0, "arm": 0.0, "rates": 0.0}
         self._queue: collections.deque[tuple[str, float, dict[str, Any]]] = collections.deque(maxlen=20000)
@@ -186,21 +201,39 @@ class MavlinkBridge:
         self.depth_problem: str | None = None  # the depth sensor's problem now (None: plausible and fused)
         self._said: dict[str, tuple[float, str]] = {}  # what a repeating message last said, and when
         self._last_implausible: str | None = None
+        self.flight: Any = None  # a dive plan being flown (fly; rovlab.interfaces.mavlink.flight.BridgeFlight)
 
     # -- control from outside ------------------------------------------------------------------
-    def set_reference(self, *, z: float | None = None, psi: float | None = None) -> None:
-        """Depth [m] / heading [rad] set-point (ValueError on bad values, nothing changes). Held
-        while the vehicle is armed in MANUAL and seen (see the module); until then it waits. A
-        value left None is the estimate's when the hold starts."""
+    def set_reference(self, *, z: float | None = None, psi: float | None = None, x: float | None = None,
+                      y: float | None = None) -> None:
+        """Depth [m] / heading [rad] set-point, and with a DP configuration north x / east y [m] of
+        the vehicle's EKF origin (LOCAL_POSITION_NED's frame). ValueError on bad values, or on x / y
+        when the controller holds no position; nothing changes then. Held while the vehicle is armed
+        in MANUAL and seen (see the module); until then it waits. A value left None is the
+        estimate's when the hold starts."""
+        if (x is not None or y is not None) and not self.dp:
+            raise ValueError(f"north/east set-points need a controller that holds x and y (dynamic positioning, e.g. "
+                             f"--config ardusub_sitl_heavy_dp); the configuration {self.core.config.name}'s "
+                             f"{self.core.controller_name} holds {', '.join(self.core.references)}")
         with self._ref_lock:
             obeying = self.core.engaged
-            self.core.set_reference(z=z, psi=psi)  # validates; engages
-            old = self._wanted_ref or {"z": None, "psi": None}
+            self.core.set_reference(z=z, psi=psi, x=x, y=y)  # validates; engages
+            old = self._wanted_ref or dict.fromkeys(("x", "y", "z", "psi"))
             if obeying:  # held already: the values left None stay what they were
-                old = {"z": float(self.core.reference[2]), "psi": float(self.core.reference[3])}
-            self._wanted_ref = {"z": old["z"] if z is None else float(z), "psi": old["psi"] if psi is None else psi}
+                old = {k: float(self.core.reference[i]) for i, k in enumerate(("x", "y", "z", "psi"))}
+            new = {"x": x, "y": y, "z": z, "psi": psi}
+            self._wanted_ref = {k: old.get(k) if v is None else float(v) for k, v in new.items()}
             if not obeying:
                 self.core.disengage()  # until the vehicle obeys (the next step decides)
+
+    def fly(self, plan: Any, guards: Any = None) -> Any:
+        """Fly a dive plan (rovlab.ident.plan.DivePlan) once the vehicle is armed in MANUAL at its
+        start depth, with guards (rovlab.interfaces.node.flight.FlightGuards); the bridge stops when
+        the flight ends (rovlab.interfaces.mavlink.flight). ValueError: a plan it cannot fly."""
+        from rovlab.interfaces.mavlink.flight import BridgeFlight
+
+        self.flight = BridgeFlight(self, plan, guards)
+        return self.flight
 
     def disengage(self) -> None:
         """Stop holding (the vehicle goes back to the pilot); the filter keeps running."""
@@ -262,7 +295,7 @@ class MavlinkBridge:
         wall = time.time()
         drain(self.conn, lambda msg: self._handle(msg, now, wall), self.counts, self._warn_once)  # bounded per call
         for out in self.core.tick(now):
-            msgs = out.messages(outputs=("Z", "N"))
+            msgs = out.messages(outputs=("X", "Y", "Z", "N") if self.dp else ("Z", "N"))
             self._queue.extend(msgs)
             if self.recorder is not None:
                 for topic, _t, m in msgs:
@@ -271,9 +304,12 @@ class MavlinkBridge:
         if self.vehicle_problems is None and self.vehicle_seen:
             self._check_vehicle_file(now)
         self._check_depth(now)
+        self._check_position(now)
         self._update_hold(now)
+        if self.flight is not None:
+            self.flight.step(now)
         arming = self.want_arm and not self.armed
-        if (self.engaged or arming) and self.vehicle_seen and self.vehicle_problems == [] \
+        if (self.engaged or arming or self.flight is not None) and self.vehicle_seen and self.vehicle_problems == [] \
                 and now >= self._due["command"] and self._gains_known(now):
             self._due["command"] = max(self._due["command"] + self.command_period, now)
             self._command(now)
@@ -307,14 +343,18 @@ class MavlinkBridge:
                 blocked = "no telemetry"
             elif self.depth_problem is not None:
                 blocked = "depth sensor: " + self.depth_problem
+            elif self.position_problem is not None:
+                blocked = "position: " + self.position_problem
             else:
                 blocked = None
             if blocked is None and not held:
-                self.core.set_reference(z=wanted["z"], psi=wanted["psi"])
-                # a hold that stops and resumes (telemetry, depth sensor) keeps the set-point it started with
-                self._wanted_ref = {"z": float(self.core.reference[2]), "psi": float(self.core.reference[3])}
-                self._say_limited("hold", f"holding depth {self.core.reference[2]:.2f} m, heading "
-                                          f"{math.degrees(self.core.reference[3]):.1f} deg", now)
+                self.core.set_reference(z=wanted["z"], psi=wanted["psi"], x=wanted.get("x"), y=wanted.get("y"))
+                # a hold that stops and resumes (telemetry, depth sensor, position) keeps the set-point it started with
+                ref = self.core.reference
+                self._wanted_ref = {k: float(ref[i]) for i, k in enumerate(("x", "y", "z", "psi"))}
+                where = f"north {ref[0]:.2f} m, east {ref[1]:.2f} m, " if self.dp else ""
+                self._say_limited("hold", f"holding {where}depth {ref[2]:.2f} m, heading "
+                                          f"{math.degrees(ref[3]):.1f} deg", now)
             elif blocked is not None and held:
                 self.core.disengage()
             self.hold_blocked = blocked
@@ -343,6 +383,49 @@ class MavlinkBridge:
             self._say_limited("depth-back", "depth sensor plausible and fused again", now)
         self.depth_problem = problem
 
+    def _check_position(self, now: float) -> None:
+        """DP only: the position the controller holds x and y on. No sample yet (ArduSub sends
+        LOCAL_POSITION_NED only while its EKF has a position: SITL about 40 s after boot, a real
+        vehicle with a DVL or USBL once EKF3 fuses it), an implausible one (found in _handle) or a
+        position channel the filter has lost (stopped arriving: timeout; jumped: gate; frozen: stuck)
+        stops the hold as the depth sensor does: said, with the value, and neutral commands -- x and
+        y are never held on a dead-reckoned prediction -- until it is fused again."""
+        if not (self.dp and self._position_channels):
+            return
+        problem = kind = self._last_bad_position
+        last = self.core.last
+        if problem is None and last is not None:
+            for j in self._position_channels:
+                label = last.channel_status[j]
+                if label in ("ok", "recovering"):
+                    continue
+                c = self.core.channels[j]
+                if not self._position_seen:
+                    problem = kind = (f"no {c.name} sample yet (LOCAL_POSITION_NED: the vehicle's EKF has no position; "
+                                      "ArduSub SITL: about 40 s after boot, when EKF3 uses its GPS)")
+                else:
+                    problem = kind = f"the filter has lost {c.name} ({label}): x and y would be a prediction"
+                break
+        if problem is not None:
+            self._say_limited("position", f"POSITION: {problem}; no position control on a predicted position: "
+                                          "neutral commands", now, key_text=kind)
+        elif self.position_problem is not None:
+            self._say_limited("position-back", "position plausible and fused again", now)
+        self.position_problem = problem
+
+    def _plausible_position(self, kind: str, fields: dict[str, Any]) -> bool:
+        """Whether a position message reads a finite x, y within PLAUSIBLE_POSITION_M of the origin;
+        an implausible one is counted, named (by _check_position) and not fused."""
+        xy = [fields.get(k) for k in ("x", "y")]
+        values = [float(v) if isinstance(v, (int, float)) else math.nan for v in xy]
+        if all(math.isfinite(v) and abs(v) <= PLAUSIBLE_POSITION_M for v in values):
+            self._last_bad_position = None
+            return True
+        self.counts["implausible_position"] += 1
+        self._last_bad_position = (f"{kind} x = {xy[0]!r}, y = {xy[1]!r} m is implausible: expected finite values "
+                                   f"within +-{PLAUSIBLE_POSITION_M:g} m of the EKF origin; its samples are rejected")
+        return False
+
     def _say_limited(self, key: str, text: str, now: float, *, key_text: str | None = None) -> None:
         """Log a message that may repeat: when its text (or ``key_text``) changed, else at most every
         DEPTH_LOST_REPEAT_S (a sensor that comes and goes at the control rate does not flood the log)."""
@@ -361,6 +444,9 @@ class MavlinkBridge:
         self.counts["received"] += 1
         if self.recorder is not None:
             self.recorder.mavlink(msg, wall)
+        if self.flight is not None and kind in ("MANUAL_CONTROL", "RC_CHANNELS_OVERRIDE") \
+                and msg.get_srcSystem() != self.sysid:
+            self.flight.pilot_input(msg)  # another ground station's sticks: a pilot takes over
         if msg.get_srcSystem() != self.target_system:
             return
         if kind == "HEARTBEAT":
@@ -406,6 +492,10 @@ class MavlinkBridge:
             return
         if kind == "SCALED_PRESSURE2" and not self._plausible_pressure(fields):
             return
+        if kind in ("LOCAL_POSITION_NED", "VISION_POSITION_ESTIMATE") and self._position_channels:
+            if not self._plausible_position(kind, fields):
+                return
+            self._position_seen = True
         for column, value in self.smap.samples(kind, fields).items():
             sensor, quantity = self._sample_of[column]
             self.core.push(sensor, quantity, value, now)
@@ -523,7 +613,7 @@ class MavlinkBridge:
             self._due["params"] = now + 1.0
             self._ask_params()
         if not self._asked_at:  # first sight: ask for the telemetry at the control rate
-            for name in _STREAMS:
+            for name in self._streams:
                 self._ask_rate(name, now)
         elif now >= self._due["rates"]:
             self._due["rates"] = now + 0.5
@@ -557,7 +647,8 @@ class MavlinkBridge:
         self._asked_at[name] = now
         self.counts["rate_requests"] += 1
         self.conn.mav.command_long_send(self.target_system, 1, self.mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-                                        _STREAMS[name], int(round(1e6 / self.rate_wanted[name])), 0, 0, 0, 0, 0)
+                                        self._streams[name], int(round(1e6 / self.rate_wanted[name])), 0, 0, 0, 0,
+                                        0)
 
     def _check_rates(self, now: float) -> None:
         """Measure each needed stream over the last RATE_WINDOW_S; ask again when it falls short
@@ -659,7 +750,7 @@ class MavlinkBridge:
             self.failsafe = False
             self.log("telemetry back: control resumes")
         last = self.core.last
-        if not self.core.engaged or last is None or not last.engaged:
+        if not (self.core.engaged or self.core.flying) or last is None or not last.engaged:
             # arming, a set-point waiting for the vehicle, or a hold stopped: neutral (no slew limit), which
             # also keeps ArduSub's pilot-input failsafe (FS_PILOT_INPUT) from disarming a vehicle we armed
             self._send_inputs(np.zeros(4), now, neutral=True)

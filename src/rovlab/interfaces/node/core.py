@@ -17,6 +17,8 @@ API (stable; additions only)::
     core.apply(config=new_config)               # redesign, keep the state; ConfigError: no change
     core.set_sensor_enabled("qualisys", False)  # its samples are dropped (the filter times it out)
     core.set_filter_mode("qualisys.z", "off")   # force a channel off / on / back to "auto"
+    flight = core.fly(plan)                     # a dive plan instead of the controller (loaded, waiting)
+    core.start_flight(); core.abort_flight(why) # fly it from the next step; abort to neutral
 
 Units and frames are rovlab's (SI, radians, NED world, FRD body): adapters convert at their edge.
 
@@ -58,6 +60,15 @@ re-based on ``now`` (counted as ``rebased``) and the filter keeps its state.
 
 **Reference.** Until :meth:`set_reference` is first called the controller is not engaged: the
 demanded wrench is zero and the PWM commands are neutral, while the filter runs.
+
+**Flying a dive plan** (issue 29; rovlab.interfaces.node.flight). :meth:`fly` loads a plan
+(rovlab.ident.plan.DivePlan) with its guards; :meth:`start_flight` flies it from the next step on
+instead of the controller (which is disengaged): each step the wrench is the plan's Flyer's for
+the latest depth sample, allocated and turned into PWM by the same compiled step (an open-loop
+controller component, rovlab.control.open_loop), so the filter predicts with the wrench the
+allocation achieved and the outputs carry the PWM flown (``engaged`` True, ``flight`` 'flying').
+After each step the flight's guards are checked on the corrected estimate; a guard, the plan's
+end or :meth:`abort_flight` ends it, and from the next step on the thrusters are neutral.
 """
 
 from __future__ import annotations
@@ -133,6 +144,7 @@ class NodeOutput:
     pwm_us: np.ndarray  # PWM command per thruster, the vehicle file's order [us]
     controller_state: dict[str, float] = field(default_factory=dict)
     channel_columns: tuple[str, ...] = ()  # per channel, its log column ('z_qualisys' ...)
+    flight: str = ""  # a dive plan's flight: '' (none), 'waiting', 'flying', 'complete', 'aborted'
 
     def variance(self) -> dict[str, float]:
         return {s: float(self.P[i, i]) for i, s in enumerate(self.states)}
@@ -185,6 +197,8 @@ class NodeCore:
         self.t0: float | None = None
         self.wait_for_samples_s = float(wait_for_samples_s)
         self._first_tick: float | None = None
+        self.flight: Any = None  # rovlab.interfaces.node.flight.PlanFlight (fly)
+        self._flight_parts: tuple[Any, Any, Any] | None = None  # (open-loop controller, its kernel, its StepOut)
         self._install(make_design(vehicle, config, plant="process", plant_step=config.sample_time,
                                   estimator=estimator, controller=controller), keep=None)
 
@@ -340,6 +354,107 @@ class NodeCore:
     def filter_modes(self) -> dict[str, str]:
         return {c.name: MODE_NAMES[int(self.estimator.ch[j, CH_MODE])] for j, c in enumerate(self.channels)}
 
+    # -- flying a dive plan (module: "Flying a dive plan") ----------------------------------------
+    @property
+    def flying(self) -> bool:
+        """A plan is being flown (the thrusters obey it, not the controller)."""
+        return self.flight is not None and self.flight.active
+
+    def depth_channel(self) -> int | None:
+        """Index of the filter's pressure depth channel (None: the filter fuses no pressure depth)."""
+        return next((j for j, (c, kind) in enumerate(zip(self.channels, self._kinds))
+                     if kind == "pressure" and c.quantity == "z"), None)
+
+    def fly(self, plan: Any, guards: Any = None) -> Any:
+        """Load ``plan`` (rovlab.ident.plan.DivePlan) with ``guards`` (flight.FlightGuards; None:
+        the defaults) and return its PlanFlight, waiting for :meth:`start_flight`. Compiles the
+        open-loop step if this process has not yet. ValueError: a plan this node cannot fly (no
+        pressure depth channel, a command step that is not a multiple of the control period, a
+        flight already under way)."""
+        from rovlab.interfaces.node.flight import PlanFlight
+
+        if self.flying:
+            raise ValueError("a plan is being flown already; abort it first")
+        if self.depth_channel() is None:
+            raise ValueError(f"the filter of {self.config.name} fuses no pressure depth: a dive plan's depth law and "
+                             "guards need one")
+        flight = PlanFlight(plan, guards, h=self.h)
+        with self._lock:
+            self._prepare_flight()
+            self.flight = flight
+        return flight
+
+    def start_flight(self) -> None:
+        """Fly the loaded plan from the next step on (the controller is disengaged)."""
+        with self._lock:
+            if self.flight is None:
+                raise ValueError("no plan loaded (fly)")
+            stamp = (self.t0 if self.t0 is not None else 0.0) + self.k * self.h
+            self.flight.start(self.k, stamp)
+            self.engaged = False
+
+    def abort_flight(self, reason: str) -> bool:
+        """Abort the flight under way (neutral thrusters from the next step); True if it was flying."""
+        with self._lock:
+            if self.flight is None or self.flight.ended:
+                return False
+            flying = self.flight.active
+            self.flight.abort(reason, None if self.t0 is None else self.t0 + self.k * self.h)
+            return flying
+
+    def _prepare_flight(self) -> None:
+        """The open-loop controller, its compiled step (warmed up on copies) and its outputs."""
+        from rovlab.control.open_loop import open_loop
+        from rovlab.sim.step import StepOut, control_step_for
+
+        if self._flight_parts is not None:
+            return
+        ctl = open_loop()
+        kernel = control_step_for(self.estimator, ctl)
+        key = (type(self.estimator), type(ctl))
+        if key not in _COMPILED:
+            from rovlab._jit import with_progress
+
+            m, n = len(self.channels), self.estimator.x.shape[0]
+            ew, cw = fresh(self.estimator), open_loop()
+            act = make_actuators(self.design.allocator, self.design.allocator.bank, self.design.allocator.B,
+                                 self.pwm_resolution_us)
+
+            def warm_up() -> None:
+                kernel(0.0, ew, cw, act, self._nav_of, np.full(m, np.nan), np.zeros(m, dtype=np.bool_), np.zeros(4),
+                       True, StepOut(np.empty((m, N_REP)), np.zeros(N_TRUTH), np.zeros(4), np.zeros(4), np.zeros(4),
+                                     np.empty(len(self.thrusters)), np.empty(n), np.empty((n, n)), np.empty(4)),
+                       False)
+
+            what = f"the plan-flight step ({type(self.estimator).__name__} + open loop)"
+            _, seconds = with_progress(warm_up, self._log, what, hint="")
+            _COMPILED.add(key)
+            if seconds > 1.0:
+                self._log(f"rovlab node: {what} ready ({seconds:.1f} s)")
+        out = self._out._replace(ctrl=np.empty(4))  # the same arrays, but the open loop's state (4)
+        self._flight_parts = (ctl, kernel, out)
+
+    def _fly_step(self, t: float, y: np.ndarray, present: np.ndarray) -> None:
+        """One step of the flight: the plan's wrench for the latest depth sample, through the open
+        loop's compiled step; then the guards on the corrected estimate."""
+        assert self._flight_parts is not None and self.flight is not None and self.t0 is not None
+        ctl, kernel, out = self._flight_parts
+        j = self.depth_channel()
+        assert j is not None
+        sample = float(self._latest[j] - self.channels[j].offset)
+        depth = sample if math.isfinite(sample) else float(self._nav[TRUTH_INDEX["z"]])
+        ctl.state[:] = self.flight.wrench(depth)
+        kernel(t, self.estimator, ctl, self.actuators, self._nav_of, y, present, self.reference, True, out, False)
+        est = set(self.design.estimator.nav)
+        nav = self._nav
+        status = status_label(int(self.estimator.ch[j, CH_STATUS]), int(self.estimator.ch[j, CH_REASON]))
+        if not self.sensor_enabled.get(self.channels[j].sensor, True):
+            status = "disabled"
+        self.flight.after_step(self.t0 + t, z=float(nav[TRUTH_INDEX["z"]]),
+                               z_sample=sample if math.isfinite(sample) else None,
+                               psi=float(nav[TRUTH_INDEX["psi"]]) if "psi" in est else None,
+                               r=float(nav[TRUTH_INDEX["r"]]) if "r" in est else None, depth_status=status)
+
     def apply(self, *, vehicle: Vehicle | None = None, config: DesignConfig | None = None) -> None:
         """Swap in a new model vehicle and/or configuration (designed first: ConfigError and no
         change on failure), keeping the estimate, covariance, controller state and, by channel
@@ -427,8 +542,13 @@ class NodeCore:
         for j, last in enumerate(newest):
             present[j] = last is not None
             y[j] = math.nan if last is None else last
-        self._kernel(t, self.estimator, self.controller, self.actuators, self._nav_of, y, present, self.reference,
-                     self.engaged, self._out, False)
+            if last is not None:
+                self._latest[j] = last
+        if self.flying:
+            self._fly_step(t, y, present)
+        else:
+            self._kernel(t, self.estimator, self.controller, self.actuators, self._nav_of, y, present, self.reference,
+                         self.engaged, self._out, False)
         self.k = k + 1
         self.counters["steps"] += 1
         out = self._output(k, t)
@@ -465,10 +585,11 @@ class NodeCore:
             k=k, t=t, stamp=self.t0 + t, states=self.states, x=self._x.copy(), P=self._P.copy(), nav=self._nav.copy(),
             estimated=tuple(self.design.estimator.nav), channels=tuple(c.name for c in self.channels),
             channel_status=labels, sensor_status=by_sensor, y=self._y.copy(), innovation=self._rep[:, 1].copy(),
-            reference=self.reference.copy(), engaged=self.engaged, tau=self._tau.copy(),
+            reference=self.reference.copy(), engaged=self.engaged or self.flying, tau=self._tau.copy(),
             tau_achieved=self._tau_cmd.copy(), thrusters=self.thrusters, pwm_us=self._pwm.copy(),
             controller_state={n: float(v) for n, v in zip(ctl.state_names, self.controller.state)},
-            channel_columns=tuple(c.column for c in self.channels))
+            channel_columns=tuple(c.column for c in self.channels),
+            flight="" if self.flight is None else self.flight.state)
 
     def _install(self, design: Design, keep: tuple[Any, Any, tuple[ChannelInfo, ...]] | None) -> None:
         """Make ``design`` the running one (compiling its step if this process has not yet)."""
@@ -536,6 +657,9 @@ class NodeCore:
             self._queue: list[deque[tuple[float, float, int]]] = [deque() for _ in range(m)]  # (value, stamp, step)
             self._stamp = np.full(m, -np.inf)
         self._y = np.full(m, np.nan)
+        latest: np.ndarray | None = getattr(self, "_latest", None)
+        if latest is None or len(latest) != m:
+            self._latest: np.ndarray = np.full(m, np.nan)  # the newest sample of each channel so far
         self._present = np.zeros(m, dtype=np.bool_)
         self._rep = np.full((m, N_REP), np.nan)
         if getattr(self, "_nav", None) is None:
@@ -549,6 +673,9 @@ class NodeCore:
         # the same arrays, as the compiled step fills them
         self._out = StepOut(self._rep, self._nav, self._tau, self._tau_cmd, self._tau_real, self._pwm, self._x, self._P,
                             np.empty(ctl.state.shape[0]))
+        if getattr(self, "flight", None) is not None and self.flight.active:
+            self.flight.abort("the node's configuration or vehicle changed during the flight")
+        self._flight_parts = None  # rebuilt for this design's estimator and outputs by the next fly()
 
 
 __all__ = ["TRUTH", "SAMPLE_RESULTS", "ChannelInfo", "NodeCore", "NodeOutput"]
