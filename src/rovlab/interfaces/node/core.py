@@ -199,6 +199,7 @@ class NodeCore:
         self._first_tick: float | None = None
         self.flight: Any = None  # rovlab.interfaces.node.flight.PlanFlight (fly)
         self._flight_parts: tuple[Any, Any, Any] | None = None  # (open-loop controller, its kernel, its StepOut)
+        self._flew = False  # the last step flew the plan
         self._install(make_design(vehicle, config, plant="process", plant_step=config.sample_time,
                                   estimator=estimator, controller=controller), keep=None)
 
@@ -544,7 +545,8 @@ class NodeCore:
             y[j] = math.nan if last is None else last
             if last is not None:
                 self._latest[j] = last
-        if self.flying:
+        self._flew = self.flying  # this step's output says engaged: its wrench was flown (a guard may end it)
+        if self._flew:
             self._fly_step(t, y, present)
         else:
             self._kernel(t, self.estimator, self.controller, self.actuators, self._nav_of, y, present, self.reference,
@@ -585,7 +587,7 @@ class NodeCore:
             k=k, t=t, stamp=self.t0 + t, states=self.states, x=self._x.copy(), P=self._P.copy(), nav=self._nav.copy(),
             estimated=tuple(self.design.estimator.nav), channels=tuple(c.name for c in self.channels),
             channel_status=labels, sensor_status=by_sensor, y=self._y.copy(), innovation=self._rep[:, 1].copy(),
-            reference=self.reference.copy(), engaged=self.engaged or self.flying, tau=self._tau.copy(),
+            reference=self.reference.copy(), engaged=self.engaged or self._flew, tau=self._tau.copy(),
             tau_achieved=self._tau_cmd.copy(), thrusters=self.thrusters, pwm_us=self._pwm.copy(),
             controller_state={n: float(v) for n, v in zip(ctl.state_names, self.controller.state)},
             channel_columns=tuple(c.column for c in self.channels),
