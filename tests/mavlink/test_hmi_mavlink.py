@@ -58,6 +58,9 @@ def test_hmi_server_on_the_bridge(tmp_path):
             hello = await _next(ws, "hello")
             assert hello["source"]["kind"] == "vehicle" and hello["source"]["has_truth"] is False
             assert hello["documents"]["loop"]["K"] and hello["documents"]["loop"]["bridge"]["command"] == "manual_control"
+            # the page shows "live" and no Start/Step/Reset/speed for it (it showed "paused" and a Start button)
+            assert hello["state"]["live"] is True and hello["state"]["running"] is False
+            assert hello["state"]["engaged"] is False  # "no set-point held: the pilot has the vehicle"
             frame = await _next(ws, "data", timeout=60.0)
             topics = {m[0] for m in frame["messages"]}
             assert "/rovlab/estimate" in topics and "/rovlab/truth" not in topics
@@ -65,9 +68,17 @@ def test_hmi_server_on_the_bridge(tmp_path):
             reply = await _next(ws, "reply")
             assert reply["id"] == 3 and reply["ok"]
             assert bridge.engaged and bridge.core.reference[2] == 1.5  # held once the vehicle is armed in MANUAL
+            state = await _next(ws, "state")  # what the page says of the set-point: wanted, and why not held
+            while not state["vehicle"]["seen"]:
+                state = await _next(ws, "state", timeout=30.0)
+            assert state["engaged"] is True
+            assert state["vehicle"]["holding"] or state["vehicle"]["hold_blocked"], state["vehicle"]
             await ws.send_str(json.dumps({"cmd": "start", "id": 4}))  # a vehicle has its own clock
             err = await _next(ws, "error")
             assert err["id"] == 4 and "own clock" in err["message"]
+            await ws.send_str(json.dumps({"cmd": "step", "id": 5, "n": 1}))  # nor single steps
+            err = await _next(ws, "error")
+            assert err["id"] == 5 and "own clock" in err["message"]
             await ws.close()
         finally:
             await client.close()

@@ -162,10 +162,12 @@ class Session:
         st = self.source.status()
         ref = st["reference"]
         return {
-            "running": self.running, "speed": self.speed, "time_s": st["time_s"],
+            "running": self.running, "live": not self.source.paced, "speed": self.speed, "time_s": st["time_s"],
             "reference": {"depth_m": ref["z"], "heading_deg": ref["psi"] / _DEG, "north_m": ref.get("x", 0.0),
                           "east_m": ref.get("y", 0.0), "schedule": ref["schedule"]},
             "sensors": st["sensors"], "filter_modes": st["filter_modes"],
+            # a vehicle bridge says whether a set-point is wanted and why it is not held (MAVLink)
+            "engaged": st.get("engaged"), "vehicle": st.get("vehicle"),
             "sensor_status": dict(self.latest.get("/rovlab/estimate", {}).get("sensors", {})),
             "log": {"rows": self.log.rows, "runs": len(self.log.runs), "folder": str(self.log.folder),
                     "stem": self.log.stem},
@@ -216,6 +218,8 @@ class Session:
 
     def _step(self, c: dict) -> Outcome:
         n = _integer(c, "n", 1, lo=1, hi=MAX_STEPS_PER_COMMAND)
+        if not self.source.paced:
+            raise CommandError("this source runs on its own clock; it cannot be stepped here")
         if self.running:
             raise CommandError("pause first: single steps are for a paused run")
         return Outcome(messages=self.advance(n), state_changed=True)

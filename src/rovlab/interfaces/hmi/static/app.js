@@ -131,7 +131,7 @@
     const c = $("conn");
     c.textContent = online ? "online" : "offline";
     c.className = "conn " + (online ? "online" : "offline");
-    for (const id of ["btn-run", "btn-step", "btn-reset", "speed"]) $(id).disabled = !online;
+    for (const id of ["btn-run", "btn-step", "btn-reset", "speed"]) $(id).disabled = !online || !!(hmi.state && hmi.state.live);
     if (online && hmi.state) renderState();
   }
 
@@ -430,8 +430,13 @@
     const dp = positionControl();
     for (const id of ["ref-north-label", "ref-east-label"]) $(id).hidden = !dp;
     if (!dp) { refEdited.delete("ref-north"); refEdited.delete("ref-east"); }
-    $("ref-now").textContent = "now " + (dp ? `north ${short(ref.north_m, 3)} m, east ${short(ref.east_m, 3)} m, ` : "") +
-      `${short(ref.depth_m, 3)} m, ${short(ref.heading_deg, 3)}° ` + (ref.schedule ? "(scenario schedule)" : "(set by hand)");
+    const st = hmi.state;
+    const held = "now " + (dp ? `north ${short(ref.north_m, 3)} m, east ${short(ref.east_m, 3)} m, ` : "") +
+      `${short(ref.depth_m, 3)} m, ${short(ref.heading_deg, 3)}° `;
+    const veh = st.vehicle;
+    if (st.live && st.engaged === false) $("ref-now").textContent = "no set-point held: the pilot has the vehicle";
+    else if (st.live && st.engaged && veh && !veh.holding) $("ref-now").textContent = held + "wanted, not held: " + (veh.hold_blocked || "waiting for the vehicle");
+    else $("ref-now").textContent = held + (st.live ? "(held)" : ref.schedule ? "(scenario schedule)" : "(set by hand)");
     for (const [id, key] of REF_FIELDS) {
       const v = ref[key];
       if (v === undefined) continue;
@@ -1026,7 +1031,17 @@
     const st = hmi.state;
     const run = $("btn-run");
     run.textContent = st.running ? "Pause" : "Start";
-    $("btn-step").disabled = st.running || !ws || ws.readyState !== WebSocket.OPEN;
+    // a vehicle (MAVLink, ROS 2) runs on its own clock: nothing to start, step, reset or speed up
+    const live = !!st.live;
+    for (const id of ["btn-run", "btn-reset", "speed"]) {
+      $(id).disabled = live || !ws || ws.readyState !== WebSocket.OPEN;
+      if (live) $(id).title = "a live vehicle runs on its own clock";
+    }
+    $("btn-step").disabled = live || st.running || !ws || ws.readyState !== WebSocket.OPEN;
+    // a vehicle has no scenario schedule; on a MAVLink vehicle the same command hands it back to the pilot
+    const canRelease = live && st.engaged !== undefined && st.engaged !== null;
+    $("ref-schedule").hidden = live && !(canRelease && st.engaged);
+    $("ref-schedule").textContent = live ? "hand the vehicle back to the pilot" : "follow the scenario's schedule";
     const speed = $("speed");
     if (document.activeElement !== speed) {
       const v = String(st.speed);
@@ -1036,7 +1051,8 @@
     if (!isFinite(hmi.stats.lastT)) $("clock").textContent = `t = ${st.time_s.toFixed(1)} s`;
     const p = st.pacing;
     const lag = p && p.lag_s !== null && p.lag_s !== undefined ? `lag ${(p.lag_s * 1000).toFixed(0)} ms · ` : "";
-    $("lag").textContent = `${st.running ? "running" : "paused"} · ${lag}${st.clients || 1} client${st.clients === 1 ? "" : "s"}`;
+    const mode = st.live ? "live (the vehicle's clock)" : st.running ? "running" : "paused";
+    $("lag").textContent = `${mode} · ${lag}${st.clients || 1} client${st.clients === 1 ? "" : "s"}`;
     renderReference();
     renderFilesTab();
   }
