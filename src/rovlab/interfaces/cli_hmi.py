@@ -97,14 +97,16 @@ def _ros2_session(args: argparse.Namespace):
 
 def _mavlink_session(args: argparse.Namespace):
     """A session on an ArduSub vehicle through the MAVLink bridge (rovlab.interfaces.mavlink)."""
-    from rovlab.interfaces.cli_mavlink import make_bridge
+    from rovlab.interfaces.cli_mavlink import add_bridge_arguments, make_bridge
     from rovlab.interfaces.hmi.session import Session
 
     vehicle = args.vehicle or "bluerov2_heavy"
     config = args.config or "bluerov2_heavy"
-    bridge_args = argparse.Namespace(connect=args.connect, vehicle=vehicle, config=config, target_system=1, sysid=255,
-                                     command="manual_control", command_hz=None, telemetry_timeout=0.5, arm=args.arm,
-                                     record=args.record)
+    # the bridge's own options and defaults (rovlab mavlink bridge), with what this command was given
+    bridge_parser = argparse.ArgumentParser(add_help=False)
+    add_bridge_arguments(bridge_parser)
+    bridge_args = bridge_parser.parse_args(["--connect", args.connect, "--vehicle", vehicle, "--config", config])
+    bridge_args.arm, bridge_args.record = args.arm, args.record
     bridge = make_bridge(bridge_args, lambda text: print(f"rovlab hmi: mavlink: {text}", file=sys.stderr, flush=True))
     from rovlab.interfaces.mavlink.source import MavlinkSource
 
