@@ -124,6 +124,7 @@ class Observer:
                                                dialect="ardupilotmega")
         self.lock = threading.Lock()
         self.truth: list[tuple[float, float, float]] = []  # (time, true depth [m], true yaw [rad])
+        self.position: list[tuple[float, int, int]] = []  # (time, true latitude, longitude [1e-7 deg]): SIM_STATE
         self.yaw: list[tuple[float, float]] = []  # ATTITUDE: the autopilot's heading, which the bridge holds
         self.servos: list[tuple[float, tuple[int, ...]]] = []
         self.heartbeat: tuple[float, int, int] | None = None  # (time, base_mode, custom_mode)
@@ -157,6 +158,7 @@ class Observer:
                     self.heartbeat = (t, msg.base_mode, msg.custom_mode)
                 elif kind == "SIM_STATE":
                     self.truth.append((t, -msg.alt, msg.yaw))  # home at sea level: depth = -altitude
+                    self.position.append((t, msg.lat_int, msg.lon_int))
                 elif kind == "ATTITUDE":
                     self.yaw.append((t, msg.yaw))
                 elif kind == "SERVO_OUTPUT_RAW":

@@ -48,6 +48,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="depth set-point [m]: engages the controller (default: estimate only, command nothing)")
     b.add_argument("--heading-deg", type=float, default=None, help="heading set-point [deg] (with --depth; default: "
                                                                   "the estimated heading when engaged)")
+    b.add_argument("--north", type=float, default=None,
+                   help="north set-point x [m] of the vehicle's EKF origin (LOCAL_POSITION_NED), with --depth; a DP "
+                        "configuration only, e.g. --config ardusub_sitl_heavy_dp (default: the estimated position)")
+    b.add_argument("--east", type=float, default=None, help="east set-point y [m], as --north")
     b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: Ctrl-C)")
     b.add_argument("--status-every", type=float, default=2.0, help="print the estimate every N s (0: never)")
     add_fly_arguments(b)
@@ -371,7 +375,7 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
 
     from rovlab.interfaces.cli import UserError
 
-    for name in ("depth", "heading_deg", "duration"):
+    for name in ("depth", "heading_deg", "north", "east", "duration"):
         v = getattr(args, name)
         if v is not None and not math.isfinite(v):
             raise UserError(f"--{name.replace('_', '-')} must be a finite number")
@@ -379,6 +383,8 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
         raise UserError(f"--depth must be >= 0 m (z is positive down), got {args.depth}")
     if args.heading_deg is not None and args.depth is None:
         raise UserError("--heading-deg needs --depth (the controller holds both)")
+    if (args.north is not None or args.east is not None) and args.depth is None:
+        raise UserError("--north/--east need --depth (the DP controller holds x, y, z and heading together)")
     if args.duration is not None and not args.duration > 0:
         raise UserError(f"--duration must be > 0 s, got {args.duration}")
     if args.fly is not None and args.depth is not None:
@@ -391,8 +397,15 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
 
     flight = load_flight(args, load_vehicle(args.vehicle).name) if args.fly is not None else None
     bridge = make_bridge(args, log)
+    if (args.north is not None or args.east is not None) and not bridge.dp:
+        bridge.close()
+        raise UserError(f"--north/--east: the configuration {bridge.core.config.name} (controller "
+                        f"{bridge.core.controller_name}) holds {', '.join(bridge.core.references)}, no north/east "
+                        "set-point; use a DP configuration (controller = \"dp\", e.g. --vehicle ardusub_sitl_heavy_gps "
+                        "--config ardusub_sitl_heavy_dp)")
     if args.depth is not None:
-        bridge.set_reference(z=args.depth, psi=None if args.heading_deg is None else math.radians(args.heading_deg))
+        bridge.set_reference(z=args.depth, psi=None if args.heading_deg is None else math.radians(args.heading_deg),
+                             x=args.north, y=args.east)
     doing = "holding " + format(args.depth, "g") + " m" if args.depth is not None else "estimating only"
     if flight is not None:
         try:
@@ -423,7 +436,8 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
             predicted = " (PREDICTED: no depth sensor)" if bridge.depth_problem is not None else ""
             held = "holding" if bridge.core.engaged else (f"not holding ({bridge.hold_blocked})" if bridge.hold_blocked
                                                            else "not holding")
-            print(f"t={o.t:7.1f} s  z={o.x[0]:.3f} m{predicted}  psi={math.degrees(o.x[1]):6.1f} deg  "
+            where = f"x={o.nav[0]:.2f} m  y={o.nav[1]:.2f} m  " if bridge.dp else ""  # nav: x, y, z, psi, ...
+            print(f"t={o.t:7.1f} s  {where}z={o.nav[2]:.3f} m{predicted}  psi={math.degrees(o.nav[3]):6.1f} deg  "
                   f"tau_Z={o.tau[2]:6.2f} N  sensors={o.sensor_status}  "
                   f"{'FAILSAFE ' if bridge.failsafe else ''}{'armed' if bridge.armed else 'disarmed'}, {held}"
                   + (f", flight {bridge.flight.flight.state} {bridge.flight.flight.duration_s:.0f} s"

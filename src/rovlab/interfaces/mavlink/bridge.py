@@ -218,7 +218,7 @@ class MavlinkBridge:
         with self._ref_lock:
             obeying = self.core.engaged
             self.core.set_reference(z=z, psi=psi, x=x, y=y)  # validates; engages
-            old = self._wanted_ref or dict.fromkeys(("x", "y", "z", "psi"))
+            old: dict[str, float | None] = self._wanted_ref or dict.fromkeys(("x", "y", "z", "psi"))
             if obeying:  # held already: the values left None stay what they were
                 old = {k: float(self.core.reference[i]) for i, k in enumerate(("x", "y", "z", "psi"))}
             new = {"x": x, "y": y, "z": z, "psi": psi}

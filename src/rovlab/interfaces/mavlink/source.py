@@ -81,10 +81,7 @@ class MavlinkSource:
 
     def set_reference(self, z: float | None = None, psi: float | None = None, *, x: float | None = None,
                       y: float | None = None) -> None:
-        if x is not None or y is not None:
-            raise ValueError("the MAVLink bridge holds depth and heading: north/east set-points need the DP "
-                             "controller, which the bridge does not run")
-        self.bridge.set_reference(z=z, psi=psi)
+        self.bridge.set_reference(z=z, psi=psi, x=x, y=y)  # north/east: DP configurations only (ValueError)
 
     def follow_schedule(self) -> None:
         """No schedule on a vehicle: stop commanding and leave it to the pilot."""
