@@ -792,10 +792,12 @@ def equation_error(data: DiveData, dof: str, start: DofModel, t0: float, t1: flo
 # The whole dive: split, fit, validate
 # --------------------------------------------------------------------------------------------
 
-def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] = DOFS,
+def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | None = None,
                   free: Mapping[str, Sequence[str]] | Sequence[str] | None = None, split: float = 0.7,
                   max_rel: float = MAX_REL, compare: Any = None) -> DiveFit:
-    """Identify heave and yaw from a dive (module docstring); ``split``: the share of the log used
+    """Identify heave and yaw from a dive (module docstring), and surge and sway
+    (rovlab.ident.horizontal); ``dofs`` None: heave and yaw, with surge and sway when the log
+    carries position or velocity; ``split``: the share of the log used
     to identify (the rest validates); ``compare``: a published parameter set
     (rovlab.ident.published.PublishedSet) whose predictions are scored too."""
     if not 0.2 <= split <= 0.95:
@@ -804,6 +806,10 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] = DOF
     if b - a < 10.0:
         raise IdentificationError(f"{data.file}: {b - a:.3g} s of data; a dive log needs at least a minute")
     t_split = a + split * (b - a)
+    if dofs is None:  # heave and yaw, and surge and sway when the log carries position or velocity
+        from rovlab.ident.horizontal import default_dofs
+
+        dofs = default_dofs(data)
     fits = {}
     for dof in dofs:
         if dof in HORIZONTAL_DOFS:  # below, together (rovlab.ident.horizontal)
@@ -1170,14 +1176,17 @@ def fly_plan(plan: Any, model: Vehicle, truth: Vehicle, *, seed: int | None = 0,
     flyer = plan.flyer()
     z_meas = float(x[2] + lz)
     horiz = bool(getattr(plan, "horizontal", False))
-    hs = _HorizontalSensors(model, sens, seed, noise, h, process_psd_horizontal) if horiz else None
+    # the horizontal sensors log on any plan (a DVL does not stop for a heave and yaw plan); the
+    # heading law and box guard fly only a surge / sway plan
+    hs = (_HorizontalSensors(model, sens, seed, noise, h, process_psd_horizontal)
+          if horiz or any(k in sens for k in ("x", "y", "u", "v")) else None)
     head_last, rate_last = float(wrap_angle(x[3] + ahrs)), 0.0
     guard_steps = 0
     zmin, zmax = x[2], x[2]
     pwm = np.full(len(names), 1500.0)
     for k in range(n_cmd * sub):
         if k % sub == 0:
-            if hs is not None:
+            if hs is not None and horiz:
                 tau, guarded = flyer.step(k // sub, z_meas - lz, heading=head_last, rate=rate_last,
                                           position=hs.position())
             else:
