@@ -91,3 +91,167 @@ def test_bank_rejects_wrong_shapes_and_nan(udrone):
         bank.pwm(np.zeros(4))
     with pytest.raises(ValueError, match="finite"):
         bank.force(np.array([1500, 1500, np.nan, 1500, 1500, 1500]))
+
+
+# --------------------------------------------------------------------------------------------
+# A cut dead band (deadband_kind = "cut"): ArduSub SITL's thruster model
+# --------------------------------------------------------------------------------------------
+
+def _cut(thruster, **curve):
+    """A thruster as given, its dead band cut (and its curve replaced by ``curve``'s coefficients if given)."""
+    from dataclasses import replace
+
+    from rovlab.params.vehicle import QuadraticCurve
+
+    if curve:
+        thruster = replace(thruster, curve=QuadraticCurve(**curve))
+    return replace(thruster, deadband_kind="cut")
+
+
+def test_cut_dead_band_is_sitls_thruster():
+    """ArduPilot libraries/SITL/SIM_Submarine.cpp (calculate_forces, V4.7.0-dev): an integer pulse within
+    1475..1525 us gives no thrust; outside it thrust = 51.48 N x o|o| with o = (pwm - 1500) / 400 -- the whole
+    offset, not the offset beyond the band's edge."""
+    from rovlab.params.vehicle import load_vehicle
+
+    t = load_vehicle("ardusub_sitl_heavy").thruster("T5")  # a vertical: 51.48 N / (400 us)^2 along its axis
+    assert t.deadband_kind == "cut" and t.deadband_us == 25.0
+    for pwm in range(1475, 1526):
+        assert force_from_pwm(t, pwm) == 0.0
+    for pwm in (1100, 1300, 1474, 1526, 1530, 1540, 1700, 1900):
+        o = (pwm - 1500) / 400
+        assert force_from_pwm(t, pwm) == pytest.approx(51.48 * o * abs(o), rel=1e-12), pwm
+    assert force_from_pwm(t, 1526) == pytest.approx(0.2175, abs=1e-4)  # the header's jump at 26 us
+    # the shifted band with the same coefficients is 0.2175 N short at 1550 us instead (what rovlab had)
+    from dataclasses import replace
+
+    assert force_from_pwm(t, 1550) - force_from_pwm(replace(t, deadband_kind="shift"), 1550) == pytest.approx(
+        51.48 * ((50 / 400) ** 2 - (25 / 400) ** 2), rel=1e-12)
+
+
+@pytest.mark.parametrize("curve", [None, {"K_L_pos": 6.07e-2, "K_NL_pos": 3.33e-4, "K_L_neg": 3.28e-2,
+                                          "K_NL_neg": 3.68e-4}])  # SITL's pure square law; uDrone T1's asymmetric fit
+def test_cut_round_trips_outside_the_gap(curve):
+    from rovlab.params.vehicle import load_vehicle
+
+    t = load_vehicle("ardusub_sitl_heavy").thruster("T1")
+    t = _cut(t, **curve) if curve else t
+    lo, hi = thrust_limits(t)
+    least_pos, least_neg = force_from_pwm(t, 1526.0), -force_from_pwm(t, 1474.0)
+    for f in np.concatenate([np.linspace(lo, -least_neg, 1001), np.linspace(least_pos, hi, 1001)]):
+        assert abs(force_from_pwm(t, pwm_from_force(t, f)) - f) < 1e-9 * max(1.0, abs(f))
+    for pwm in np.concatenate([np.linspace(1100, 1474, 300), np.linspace(1526, 1900, 300)]):
+        assert pwm_from_force(t, force_from_pwm(t, pwm)) == pytest.approx(pwm, abs=1e-9)
+    assert pwm_from_force(t, 0.0) == 1500.0
+
+
+@pytest.mark.parametrize("curve", [None, {"K_L_pos": 6.07e-2, "K_NL_pos": 3.33e-4, "K_L_neg": 3.28e-2,
+                                          "K_NL_neg": 3.68e-4}])
+def test_cut_rounds_a_demand_in_the_gap_to_the_nearer_force(curve):
+    """A demand smaller than the least thrust outside the band (at its edge + 1 us) is commanded as whichever
+    of neutral (0 N) and the edge + 1 us is nearer in force: neutral below half the least thrust, the edge + 1 us
+    from half on; the same on the reverse side with its own coefficients."""
+    from rovlab.params.vehicle import load_vehicle
+
+    t = load_vehicle("ardusub_sitl_heavy").thruster("T5")
+    t = _cut(t, **curve) if curve else t
+    for sign, edge in ((1.0, 1526.0), (-1.0, 1474.0)):
+        least = abs(force_from_pwm(t, edge))
+        assert least > 0.0
+        for frac in (1e-6, 0.1, 0.3, 0.4999):
+            assert pwm_from_force(t, sign * frac * least) == 1500.0, (sign, frac)
+        for frac in (0.5, 0.6, 0.9, 0.999999):
+            assert pwm_from_force(t, sign * frac * least) == edge, (sign, frac)
+            # the error in force is never more than half the least thrust
+            assert abs(force_from_pwm(t, edge) - sign * frac * least) <= 0.5 * least
+        assert pwm_from_force(t, sign * least) == pytest.approx(edge, abs=1e-9)  # from here on the exact root
+
+
+def test_compiled_and_plain_kernels_agree_on_every_kind():
+    """The cut next to the shifted quadratic and the T200 table, plain kernels against numba's, forward, inverse
+    and the inverse with the dead band's hysteresis (rovlab.models.thruster_kernels)."""
+    from rovlab.models import thruster_kernels as tk
+    from rovlab.models import thrusters as th
+    from rovlab.params.vehicle import load_vehicle
+
+    sitl, udrone, heavy = (load_vehicle(n) for n in ("ardusub_sitl_heavy", "udrone", "bluerov2_heavy"))
+    thrusters = [sitl.thruster("T1"), sitl.thruster("T5"), udrone.thruster("T1"), heavy.thruster("T1"),
+                 _cut(udrone.thruster("T4"))]
+    bank = ThrusterBank.from_thrusters(thrusters)
+    assert bank.rows[:, tk.K_KIND].tolist() == [tk.KIND_CUT, tk.KIND_CUT, tk.KIND_QUADRATIC, tk.KIND_TABLE,
+                                                tk.KIND_CUT]
+    rng = np.random.default_rng(30)
+    n = len(thrusters)
+    pwm = np.concatenate([rng.uniform(1100, 1900, (300, n)), rng.integers(1470, 1531, (300, n)).astype(float)])
+    force = np.concatenate([rng.normal(0.0, 5.0, (300, n)), rng.normal(0.0, 0.3, (300, n))])
+    for p in pwm:
+        np.testing.assert_array_equal(bank.force(p), bank.force(p, compiled=False))
+    for f in force:
+        np.testing.assert_array_equal(bank.pwm(f), bank.pwm(f, compiled=False))
+    hold = th.bank_pwm_hold_into  # compiled
+    state = [(np.zeros(n), np.zeros(n)), (np.zeros(n), np.zeros(n))]
+    for f in force:
+        outs = []
+        for kernel, (side, sum_f) in zip((hold, tk.bank_pwm_hold_into), state):
+            ff, out = f.copy(), np.empty(n)
+            kernel(bank.rows, bank.grid_pwm, bank.grid_force, ff, side, sum_f, 20.0, out)
+            outs.append((out, ff))
+        np.testing.assert_array_equal(outs[0][0], outs[1][0])
+        np.testing.assert_array_equal(outs[0][1], outs[1][1])
+    np.testing.assert_array_equal(state[0][0], state[1][0])
+
+
+def test_cut_hysteresis_waits_at_its_own_edge_then_crosses():
+    """bank_pwm_hold_into on a cut band: a thruster pushing forward that gets a small reverse demand (its inverse:
+    1474 us, 1 us beyond the reverse edge) waits at 1525 us (its own edge: no thrust, force reported 0) until the
+    summed reverse demand needs 20 us beyond 1475 us; a demand in the gap below half the least thrust is short
+    of the edge and waits too."""
+    from rovlab.models import thruster_kernels as tk
+    from rovlab.params.vehicle import load_vehicle
+
+    bank = ThrusterBank.from_thrusters([load_vehicle("ardusub_sitl_heavy").thruster("T5")])
+    side, sum_f, out = np.zeros(1), np.zeros(1), np.empty(1)
+    least = -float(bank.force(np.array([1474.0]), compiled=False)[0])
+
+    def step(f: float) -> tuple[float, float]:
+        ff = np.array([f])
+        tk.bank_pwm_hold_into(bank.rows, bank.grid_pwm, bank.grid_force, ff, side, sum_f, 20.0, out)
+        return float(out[0]), float(ff[0])
+
+    assert step(1.0)[0] > 1526.0 and side[0] == 1.0
+    assert step(-0.3 * least) == (1525.0, 0.0)  # rounds to neutral: short of the reverse edge
+    pwm_cross = float(bank.pwm(np.array([-1.0]), compiled=False)[0])
+    crossed_after = None
+    for k in range(1, 200):
+        pwm, given = step(-1.05 * least)
+        if pwm < 1475.0:
+            crossed_after = k
+            break
+        assert (pwm, given) == (1525.0, 0.0)
+    # crosses once the sum needs >= 20 us beyond 1475 us: a sum of f(1455 us) = 51.48 (45/400)^2 = 0.65 N
+    need = 51.48 * (45 / 400) ** 2
+    assert crossed_after is not None and crossed_after == int(np.ceil((need - 0.3 * least) / (1.05 * least)))
+    assert side[0] == -1.0 and pwm_cross < 1475.0
+    # without the hysteresis the same demand is the plain inverse at once
+    side[:] = 1.0
+    sum_f[:] = 0.0
+    ff = np.array([-1.05 * least])
+    tk.bank_pwm_hold_into(bank.rows, bank.grid_pwm, bank.grid_force, ff, side, sum_f, 0.0, out)
+    assert out[0] == float(bank.pwm(np.array([-1.05 * least]), compiled=False)[0]) < 1475.0
+
+
+def test_every_other_packaged_vehicle_keeps_its_shifted_dead_band():
+    """deadband_kind defaults to "shift": no packaged vehicle but SITL's changes kind or numbers (uDrone's curve
+    values are held to the thesis above)."""
+    from rovlab.models import thruster_kernels as tk
+    from rovlab.params import load_vehicle, packaged_vehicle_names
+
+    for name in packaged_vehicle_names():
+        v = load_vehicle(name)
+        kinds = {t.deadband_kind for t in v.thrusters}
+        rows = ThrusterBank.from_vehicle(v).rows[:, tk.K_KIND]
+        if name == "ardusub_sitl_heavy":
+            assert kinds == {"cut"} and np.all(rows == tk.KIND_CUT)
+        else:
+            assert kinds == {"shift"}, name
+            assert np.all((rows == tk.KIND_QUADRATIC) | (rows == tk.KIND_TABLE)), name

@@ -194,3 +194,29 @@ def test_vehicle_check_exit_status_and_show_json_is_strict_json(tmp_path, capsys
     assert main(["vehicle", "show", "udrone", "--json"]) == 0
     out = capsys.readouterr().out
     json.loads(out, parse_constant=lambda c: pytest.fail(f"not JSON: {c}"))
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "expected"),
+    [
+        ('deadband_kind = "cut"      #', 'deadband_kind = "cutt"      #', "one of 'shift', 'cut'"),
+        ("deadband_us = 25           # SITL's ESC dead zone", "deadband_us = 0  #", "deadband_us > 0"),
+        ("pwm_max_us = 1900", "pwm_max_us = 1525.5", "pwm_neutral_us + deadband_us + 1 <= pwm_max_us"),
+    ],
+)
+def test_a_bad_cut_dead_band_is_named(tmp_path, old, new, expected):
+    """deadband_kind = "cut" (ArduSub SITL's thrusters): a misspelt kind, a cut without a band, a band whose
+    least pulse (edge + 1 us) lies outside the PWM range: each named by file and key, all at once."""
+    text = packaged_vehicle_path("ardusub_sitl_heavy").read_text()
+    assert old in text
+    msgs = _problems(tmp_path, text.replace(old, new, 1))
+    hits = [m for m in msgs if ": thrusters[0].deadband_kind:" in m]
+    assert hits and expected in hits[0], msgs
+
+
+def test_a_cut_dead_band_on_a_table_is_refused(tmp_path):
+    text = packaged_vehicle_path("bluerov2_heavy").read_text()
+    assert text.count('model = "table"') >= 1
+    msgs = _problems(tmp_path, text.replace('model = "table"', 'model = "table"\ndeadband_kind = "cut"', 1))
+    hits = [m for m in msgs if ": thrusters[0].deadband_kind:" in m]
+    assert hits and "applies to the quadratic model" in hits[0], msgs

@@ -189,12 +189,15 @@ def thrust_rig(vehicle: Vehicle, thrusters: Sequence[str] | str | None = None, *
     notes: tuple[str, ...] = () if truth else (f"{thr.name} is tabulated ({thr.table} at {thr.voltage:g} V): "
                                                "the truth is the table, "
                               "not a quadratic curve",)
+    if truth and thr.deadband_kind == "cut":
+        notes += (f"{thr.name}'s dead band is cut (its curve is of the whole offset from neutral), the fit's is "
+                  "shifted: the fit does not reproduce it",)
     if len(names) > 1:
         notes += (f"{len(names)} thrusters on the rig together ({', '.join(names)}): identify with --pair {len(names)}",)
         def curve_of(t: Any) -> tuple:
             c = t.curve
             coefs = (c.K_L_pos, c.K_NL_pos, c.K_L_neg, c.K_NL_neg) if c is not None else None
-            return (t.model, coefs, t.table, t.voltage, t.deadband_us, t.pwm_neutral_us)
+            return (t.model, coefs, t.table, t.voltage, t.deadband_us, t.deadband_kind, t.pwm_neutral_us)
 
         if any(curve_of(vehicle.thruster(n)) != curve_of(thr) for n in names[1:]):
             notes += (f"{', '.join(names)} do not share one thrust curve: --pair fits their average, and the truth "

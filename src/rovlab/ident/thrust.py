@@ -313,6 +313,7 @@ def thrust_edits(fit: ThrustFit, thrusters: Sequence[str], *, digits: int = 4) -
         edits[f"{block}.quadratic"] = curve
         edits[f"{block}.table"] = DELETE
         edits[f"{block}.deadband_us"] = significant(fit.deadband_us, 4)
+        edits[f"{block}.deadband_kind"] = DELETE  # the fit's dead band shifts the curve (the default)
         if fit.neutral_us != NEUTRAL_US:
             edits[f"{block}.pwm_neutral_us"] = fit.neutral_us
     return edits

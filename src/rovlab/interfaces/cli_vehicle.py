@@ -161,6 +161,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 "model": t.model,
                 "curve": dataclasses.asdict(t.curve) if t.curve else {"table": t.table, "voltage": t.voltage},
                 "pwm_range_us": [t.pwm_min_us, t.pwm_max_us], "deadband_us": t.deadband_us,
+                "deadband_kind": t.deadband_kind,
                 "thrust_limits": [float(alloc.f_min[i]), float(alloc.f_max[i])],
             }
             for i, t in enumerate(v.thrusters)
@@ -185,12 +186,15 @@ def _cmd_show(args: argparse.Namespace) -> int:
     print("  damping     DOF      linear   |x|x      x^3")
     for dof, d in info["damping"].items():
         print(f"              {dof:6s} {d['linear']:8.3f} {d['quadratic']:8.3f} {d['cubic']:8.2f}")
-    print("  thrusters   name  position [m]               direction        model      limits [N]")
+    print("  thrusters   name  position [m]               direction        model      limits [N]     dead band")
     for td in info["thruster_details"]:
         pos = " ".join(f"{x:+.3f}" for x in td["position"])
         dirn = " ".join(f"{x:+.2f}" for x in td["direction"])
         lo, hi = td["thrust_limits"]
-        print(f"              {td['name']:5s} [{pos}]  [{dirn}]  {td['model']:9s}  {lo:+.1f} .. {hi:+.1f}")
+        dead = ("the table's" if td["model"] == "table" else "none" if td["deadband_us"] == 0
+                else f"+-{td['deadband_us']:g} us {td['deadband_kind']}")
+        print(f"              {td['name']:5s} [{pos}]  [{dirn}]  {td['model']:9s}  {lo:+.1f} .. {hi:+.1f}"
+              f"  {dead}")
     print("  sensors     " + ", ".join(f"{s['name']} ({s['kind']}, {s['rate_hz']:g} Hz)" for s in info["sensors"]))
     print(f"  configuration matrix B (rows X Y Z K M N; rank {info['configuration_rank']}):")
     print("              " + "".join(f"{n:>9s}" for n in v.thruster_names))

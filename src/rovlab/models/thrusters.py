@@ -6,6 +6,10 @@ Two models, chosen per thruster in the vehicle file:
   and dead band d, s = u - d (u > d) or s = u + d (u < -d), and f = K_L s + K_NL s|s|
   (K_L, K_NL taken from the forward or the reverse set). The inverse is the exact root of
   the quadratic, written in the cancellation-free form s = 2 f / (K_L + sqrt(K_L^2 + 4 K_NL |f|)).
+  With ``deadband_kind = "cut"`` (ArduPilot SITL's submarine) the band is cut out of the curve
+  instead: s = u for |u| > d, f = 0 within it, so thrust jumps from 0 to f(d + 1 us) at the
+  band's edge. Its inverse rounds a demand in that gap to the nearer in force of neutral and
+  neutral +- (d + 1 us): neutral below half of f(d + 1 us), the edge + 1 us from half on.
 * ``table``: Blue Robotics' T200 bollard-thrust tables (10-20 V, September 2019), linear in
   supply voltage and in PWM. The tables are made monotone from neutral outwards (the maker's
   data dips by a few grams at full reverse) so that the forward map and its inverse agree.
@@ -36,6 +40,7 @@ from rovlab.models.thruster_kernels import (  # noqa: F401  (re-exported: the ro
     K_NEUTRAL,
     K_PMAX,
     K_PMIN,
+    KIND_CUT,
     KIND_QUADRATIC,
     KIND_TABLE,
     ZERO_FORCE,
@@ -123,7 +128,7 @@ class ThrusterBank:
             rows[i, K_PMAX] = t.pwm_max_us
             if t.model == "quadratic":
                 assert t.curve is not None
-                rows[i, K_KIND] = KIND_QUADRATIC
+                rows[i, K_KIND] = KIND_CUT if t.deadband_kind == "cut" else KIND_QUADRATIC
                 rows[i, K_KLP:K_KNLN + 1] = (t.curve.K_L_pos, t.curve.K_NL_pos, t.curve.K_L_neg, t.curve.K_NL_neg)
             else:
                 assert t.voltage is not None

@@ -97,6 +97,9 @@ class Thruster:
     pwm_neutral_us: float
     deadband_us: float
     source: str = ""
+    # "shift": the curve starts at the dead band's edge (s = u -+ d, the MC-Lab fit); "cut": the curve of the
+    # whole offset u, zero within the band (ArduPilot SITL's SIM_Submarine); rovlab.models.thruster_kernels
+    deadband_kind: str = "shift"
 
 
 @dataclass(frozen=True, eq=False)
@@ -363,11 +366,24 @@ def _read_thruster(t: TableReader) -> Thruster:
         if not (pwm_min < neutral - dead and neutral + dead < pwm_max):  # dead = 0: no dead band
             t.problem("pwm_min_us", [pwm_min, neutral, dead, pwm_max],
                       "pwm_min_us < pwm_neutral_us - deadband_us and pwm_neutral_us + deadband_us < pwm_max_us")
+    dead_kind = t.string("deadband_kind", "shift", choices=("shift", "cut"))
+    if dead_kind == "cut":
+        if model != "quadratic":
+            t.problem("deadband_kind", dead_kind, f"'shift' or no deadband_kind for model = {model!r} (a cut dead "
+                      "band applies to the quadratic model; a table has its own dead band)")
+        elif np.isfinite(dead) and dead <= 0.0:
+            t.problem("deadband_kind", dead_kind, f"a dead band to cut: deadband_us > 0 (it is {dead:g}; without a "
+                      "dead band, leave deadband_kind out)")
+        elif all(np.isfinite([pwm_min, pwm_max, neutral, dead])) and not (
+                pwm_min <= neutral - dead - 1.0 and neutral + dead + 1.0 <= pwm_max):
+            t.problem("deadband_kind", [pwm_min, neutral, dead, pwm_max], "a cut dead band's least pulses within "
+                      "the range: pwm_min_us <= pwm_neutral_us - deadband_us - 1 and pwm_neutral_us + deadband_us + 1 "
+                      "<= pwm_max_us")
     source = t.string("source", "")
     t.finish()
     return Thruster(name=name, position=_frozen(position), direction=_frozen(direction), model=model,
                     curve=curve, table=table, voltage=voltage, pwm_min_us=pwm_min, pwm_max_us=pwm_max,
-                    pwm_neutral_us=neutral, deadband_us=dead, source=source)
+                    pwm_neutral_us=neutral, deadband_us=dead, source=source, deadband_kind=dead_kind or "shift")
 
 
 def _read_sensor(s: TableReader) -> Sensor:
