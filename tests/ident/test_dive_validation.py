@@ -96,6 +96,7 @@ def test_identify_dive_scores_the_published_set_and_draws_the_figure(capsys, tmp
         assert r["identified"][2] < r["published"][2]
     text_code, text, _ = run(capsys, "identify", "dive", log, "--vehicle", "bluerov2_heavy", "--no-plot")
     assert text_code == 0 and "identified / file / published wu2018" in text and "Tables 5.1-5.3" in text
+    assert "from the vehicle file: B-W" in text
 
 
 def test_a_vehicle_without_a_published_set_has_no_such_column_and_says_so(capsys, tmp_path, short_dive):
@@ -140,3 +141,60 @@ def test_validation_traces_put_the_identified_model_on_the_measurements(heavy, s
         assert rmse(tr.k_step, "identified") < rmse(tr.k_step, "file")
         assert rmse(tr.free, "identified") < rmse(tr.free, "file")
         assert tr.free["identified"][0][0] == pytest.approx(tr.free_start)
+
+
+# --------------------------------------------------------------------------------------------
+# An unplanned dive: a pilot with a joystick (rovlab.ident.pilot)
+# --------------------------------------------------------------------------------------------
+
+def _pilot_fit(heavy, seed, *, forward_runs=True):
+    from rovlab.ident import pilot
+
+    p = pilot.pilot_dive(heavy, 300.0, seed=seed, forward_runs=forward_runs)
+    truth = dive.hidden_vehicle(heavy, 1000 + seed)
+    flight = dive.fly_plan(p, heavy, truth, seed=seed)
+    return p, flight, dive.identify_dive(dive.dive_from_columns(flight.columns, heavy), heavy)
+
+
+def test_a_pilot_flies_like_a_pilot(heavy):
+    """No excitation plan: descents and ascents to depths the pilot picks, holds corrected by eye,
+    turns, forward runs, hands off; the stick in MANUAL_CONTROL's 1/1000 steps with a dead zone."""
+    from rovlab.ident import pilot
+
+    p = pilot.pilot_dive(heavy, 300.0, seed=11)
+    flyer = p.flyer()
+    taus = [flyer.step(k, 1.5 if k < 1500 else 2.5)[0] for k in range(len(p.Z))]
+    kinds = {task for _, task in flyer.tasks}
+    assert {"hold", "turn", "forward"} <= kinds and ({"descend", "ascend"} & kinds)
+    tau = np.array(taus)
+    lo, hi = p.capacity["yaw"]
+    assert np.max(np.abs(tau[:, 3])) <= 0.5 * hi + 1e-9  # 50 % pilot gain
+    assert np.all(tau[:, 1] == 0.0)  # no lateral stick
+    assert np.any(tau[:, 2] > 0) and np.any(tau[:, 2] < 0)  # heave stick both ways (down: positive Z, NED)
+    with pytest.raises(ValueError, match="submerged"):
+        pilot.pilot_dive(heavy, 300.0, depth_min=0.1)
+
+
+def test_a_pilot_dive_determines_heave_and_says_when_surge_runs_cloud_yaw(heavy):
+    """What identify dive gives on a 5-minute pilot-driven dive (docs/identification.md, "An
+    unplanned dive"): heave determined and within its sigmas; with forward runs in the log the
+    report warns that the yaw model leaves out the surge coupling; without them, yaw too is
+    determined within its sigmas."""
+    _, flight, fit = _pilot_fit(heavy, 11)
+    assert not any(f.refused_dof for f in fit.fits.values())
+    for prm in fit.fits["heave"].params:
+        if prm.status == "held":
+            continue
+        true = flight.truth[prm.name]
+        assert prm.status == "estimated" and abs(prm.estimate - true) <= 3 * prm.sigma, (prm.name, prm.estimate, true)
+        if prm.key in ("linear", "quadratic"):
+            assert abs(prm.estimate / true - 1) < 0.05, prm.name
+    assert any("surge/sway thrust" in n and "N_r" in n for n in fit.notes)
+    _, flight, fit = _pilot_fit(heavy, 1, forward_runs=False)
+    assert not any("surge/sway thrust" in n for n in fit.notes)
+    for f in fit.fits.values():
+        for prm in f.params:
+            if prm.status == "held":
+                continue
+            true = flight.truth[prm.name]
+            assert prm.status == "estimated" and abs(prm.estimate - true) <= 3 * prm.sigma, (prm.name, prm.estimate, true)

@@ -276,7 +276,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "model, the thrusters (PWM quantised to 1 us, dead band) and a BlueROV2's sensors "
                                     "(depth at 2 Hz, smoothed AHRS heading and yaw rate at 20 Hz); the log is what "
                                     "rovlab identify dive reads. The truth goes into the file's JSON sidecar.")
-    p.add_argument("--plan", required=True, metavar="PLAN.toml")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--plan", metavar="PLAN.toml", help="the plan to fly (rovlab lab plan-dive)")
+    what.add_argument("--pilot", action="store_true",
+                      help="no plan: a pilot flies the dive by joystick in ArduSub's MANUAL mode (descents, holds by "
+                           "eye, turns, forward runs, pauses; rovlab.ident.pilot), drawn from --seed")
+    p.add_argument("--duration", type=_positive, default=300.0, metavar="S", help="--pilot: length of the dive (300 s)")
     p.add_argument("--truth-vehicle", metavar="NAME|FILE",
                    help="the true vehicle (default: --vehicle with its heave and yaw added mass and damping changed by "
                         "up to --spread and its net buoyancy by up to 2 N, drawn from --seed)")
@@ -885,10 +890,15 @@ def _cmd_lab_dive(args: argparse.Namespace) -> int:
     from rovlab.params.vehicle import load_vehicle
 
     v = _lab_vehicle(args)
-    plan = dive_plan.read_plan(args.plan)
-    if plan.vehicle != v.name:
-        print(f"rovlab: note: {args.plan} was planned for {plan.vehicle!r}, flown with {v.name!r}", file=sys.stderr)
     seed = args.seed if args.seed is not None else lab.new_seed()
+    if args.pilot:
+        from rovlab.ident import pilot
+
+        plan: Any = _lab_call(lambda: pilot.pilot_dive(v, args.duration, seed=seed))
+    else:
+        plan = dive_plan.read_plan(args.plan)
+        if plan.vehicle != v.name:
+            print(f"rovlab: note: {args.plan} was planned for {plan.vehicle!r}, flown with {v.name!r}", file=sys.stderr)
     truth = (load_vehicle(args.truth_vehicle) if args.truth_vehicle
              else _lab_call(lambda: dive.hidden_vehicle(v, seed, spread=args.spread)))
     flight = _lab_call(lambda: dive.fly_plan(plan, v, truth, seed=seed, depth_rate_hz=args.depth_rate))
@@ -896,8 +906,8 @@ def _cmd_lab_dive(args: argparse.Namespace) -> int:
     notes += (f"true depth {flight.depth_range[0]:.2f} .. {flight.depth_range[1]:.2f} m",)
     fmt = {k: ".6g" for k in flight.columns if k.startswith("pwm_")}
     data = lab.LabData("dive", flight.columns, flight.truth,
-                       {"plan": args.plan, "truth_vehicle": args.truth_vehicle or f"hidden (seed {seed}, spread "
-                                                                                    f"{args.spread:g})",
+                       {"plan": args.plan or f"none: a pilot (seed {seed}, {args.duration:g} s)",
+                        "truth_vehicle": args.truth_vehicle or f"hidden (seed {seed}, spread {args.spread:g})",
                         "depth_rate_hz": args.depth_rate}, seed, v.name, fmt, notes)
     return _lab_report(args, [(args.out, data)], f"rovlab identify dive {args.out} --vehicle {args.vehicle}")
 
