@@ -88,6 +88,7 @@ def add_bridge_arguments(p: argparse.ArgumentParser, *, connect_default: str = "
                    help="the bridge's MAVLink system id; must be the vehicle's ground station id, MAV_GCS_SYSID "
                         "(SYSID_MYGCS before ArduSub 4.7; default 255)")
     p.add_argument("--command", choices=("manual_control", "rc_override"), default="manual_control",
+                   dest="command_mode",  # not args.command: the sub-command's name, which errors are prefixed with
                    help="how to command ArduSub: MANUAL_CONTROL (default) or RC_CHANNELS_OVERRIDE")
     p.add_argument("--command-hz", type=float, default=None, help="command rate [Hz] (default: the control rate)")
     p.add_argument("--telemetry-timeout", type=float, default=0.5,
@@ -128,7 +129,7 @@ def load_flight(args: argparse.Namespace, vehicle_name: str) -> tuple[Any, Any] 
     for a bad plan file or guard, each named with its value and what was expected."""
     from rovlab.ident.plan import read_plan
     from rovlab.interfaces.cli import UserError
-    from rovlab.interfaces.node.flight import FlightGuards
+    from rovlab.interfaces.node.flight import GUARD_RANGES, FlightGuards
 
     if args.fly is None:
         return None
@@ -137,13 +138,16 @@ def load_flight(args: argparse.Namespace, vehicle_name: str) -> tuple[Any, Any] 
         if v is not None and not math.isfinite(v):
             raise UserError(f"--{name.replace('_', '-')} must be a finite number, got {v}")
     rate = args.fly_guard_yaw_rate_deg
+    lo, hi, _ = GUARD_RANGES["yaw_rate_rad_s"]
+    if rate is not None and not lo <= math.radians(rate) <= hi:
+        raise UserError(f"--fly-guard-yaw-rate-deg must be within {math.degrees(lo):.1f} .. {math.degrees(hi):.0f} "
+                        f"deg/s, got {rate:g}")
     try:
         guards = FlightGuards(depth_margin_m=args.fly_guard_depth_margin, turns=args.fly_guard_turns,
                               yaw_rate_rad_s=None if rate is None else math.radians(rate),
                               start_tolerance_m=args.fly_start_tolerance).validated()
     except ValueError as exc:
         option = {"depth_margin_m": "--fly-guard-depth-margin", "turns": "--fly-guard-turns",
-                  "yaw_rate_rad_s": "--fly-guard-yaw-rate-deg (in rad/s here)",
                   "start_tolerance_m": "--fly-start-tolerance"}
         text = str(exc)
         for key, opt in option.items():
@@ -180,7 +184,7 @@ def make_bridge(args: argparse.Namespace, log: Any) -> Any:
         from rovlab.interfaces.mavlink.bridge import MavlinkBridge
 
         return MavlinkBridge(vehicle, config, connect=args.connect, target_system=args.target_system,
-                             sysid=args.sysid, command=args.command, command_hz=args.command_hz,
+                             sysid=args.sysid, command=args.command_mode, command_hz=args.command_hz,
                              telemetry_timeout_s=args.telemetry_timeout, arm=args.arm, record=args.record, log=log,
                              trust_vehicle_file=getattr(args, "trust_vehicle_file", False))
     except MavlinkMissing as exc:
