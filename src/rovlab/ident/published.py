@@ -73,11 +73,10 @@ class PublishedSet:
 
     def note(self) -> str:
         """One line for a report: which set, where from, what is the file's."""
-        from_file = self.taken_from_file()
-        why = "; ".join(f"{k}: {v}" for k, v in self.from_file.items())
+        names = [f"{k} ({self.from_file[k]})" if k in self.from_file else k for k in self.taken_from_file()]
         return (f"published set {self.name}: {self.title}"
-                + (f"; from the vehicle file: {', '.join(from_file)}" if from_file else "")
-                + (f" ({why})" if why else "") + "; the full citation is in --json (published_set)")
+                + (f"; from the vehicle file: {', '.join(names)}" if names else "")
+                + "; the full citation is in --json (published_set)")
 
     def as_dict(self) -> dict[str, Any]:
         return {"name": self.name, "title": self.title, "citation": self.citation, "source": self.source,
