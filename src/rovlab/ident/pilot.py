@@ -4,10 +4,11 @@
 Nothing here is an excitation design. The pilot strings together what pilots do in a pool: descend
 to a depth, look around holding it by eye, turn towards something, run forward, ascend a little,
 and pause. In MANUAL mode the autopilot holds nothing: each stick maps to a share of the thrust in
-its DOF (ArduSub's pilot gain, 50 % here), so the slightly heavy vehicle sinks unless the pilot
-corrects. The pilot's hand is a first-order lag (0.3 s) on the intended stick position, quantised
-to the 1/1000 steps of MAVLink's MANUAL_CONTROL, with a 5 % dead zone around the centre (a QGC
-joystick default); the pilot reads the depth off the screen (the logged 2 Hz depth) and corrects
+its DOF times the joystick gain (ArduSub's JS_GAIN_DEFAULT, 0.5 by default per ArduSub's parameter
+documentation), so the slightly heavy vehicle sinks unless the pilot corrects. The pilot's hand is
+a first-order lag (0.3 s, an assumption) on the intended stick position, quantised to the 1/1000
+steps of MAVLink's MANUAL_CONTROL, with a 5 % dead zone around the centre (an assumption: the
+ground station sets it); the pilot reads the depth off the screen (the logged 2 Hz depth) and corrects
 by eye: only once it is off by more than 15-25 cm, with a gentle 10-25 % stick, until back within
 10 cm. Surge runs are flown too (the 4-DOF plant moves), although identify dive models heave and
 yaw only.
@@ -26,7 +27,7 @@ import numpy as np
 
 from rovlab.params.vehicle import Vehicle
 
-GAIN = 0.5  # ArduSub's pilot gain: full stick = 50 % of the thrust in that DOF
+GAIN = 0.5  # ArduSub's joystick gain JS_GAIN_DEFAULT (default 0.5): full stick = 50 % of the thrust in that DOF
 HAND_TAU_S = 0.3  # the pilot's hand on the stick: first-order lag [s]
 DEAD_ZONE = 0.05  # stick share zeroed around the centre
 TASKS = ("descend", "hold", "turn", "forward", "ascend", "pause")
