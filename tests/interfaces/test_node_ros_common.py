@@ -120,6 +120,12 @@ def test_incoming_messages_and_their_refusals():
     imu = SimpleNamespace(orientation=SimpleNamespace(x=0.0, y=0.0, z=0.0, w=0.0), orientation_covariance=[-1.0] + [0] * 8,
                           angular_velocity=SimpleNamespace(x=0.0, y=0.0, z=0.2))
     assert rc.imu_samples(imu) == {"r": pytest.approx(-0.2)}  # no orientation (REP-145), FLU wz -> FRD r
+    # rclpy hands the covariance as a numpy array: `cov or []` raised "truth value of an array is ambiguous",
+    # so the ROS 2 node dropped every IMU message of a vehicle with an IMU (found flying bluerov2_heavy, issue 29)
+    imu = SimpleNamespace(orientation=SimpleNamespace(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=np.zeros(9),
+                          angular_velocity=SimpleNamespace(x=0.0, y=0.0, z=0.2))
+    got = rc.imu_samples(imu)
+    assert got["r"] == pytest.approx(-0.2) and got["psi"] == pytest.approx(math.pi / 2)  # ENU yaw 0 = heading east
     with pytest.raises(rc.MessageError, match="stamp"):
         rc.stamp_seconds(float("nan"), 0)
 

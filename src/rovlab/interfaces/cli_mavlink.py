@@ -107,9 +107,9 @@ def add_fly_arguments(p: argparse.ArgumentParser) -> None:
     d = FlightGuards()
     r = GUARD_RANGES
     p.add_argument("--fly", metavar="PLAN", default=None,
-                   help="fly this dive plan (rovlab lab plan-dive) in MANUAL once armed at its start depth, with depth "
-                        "and heading guards; abort to neutral on a guard, lost telemetry or pilot input; then stop "
-                        "(exit 1 if aborted). Record it with --record; docs/identification.md 'Flying a plan'")
+                   help="fly this dive plan (rovlab lab plan-dive) at its start depth (the bridge: armed in MANUAL), "
+                        "with depth and heading guards; abort to neutral on a guard, lost telemetry or pilot input; "
+                        "then stop (exit 1 if aborted). Record it with --record; docs/identification.md 'Flying a plan'")
     p.add_argument("--fly-guard-depth-margin", type=float, default=d.depth_margin_m, metavar="M",
                    help=f"abort when the depth leaves the plan's band by more than this [m] (default "
                         f"{d.depth_margin_m:g}, {r['depth_margin_m'][0]:g} .. {r['depth_margin_m'][1]:g})")

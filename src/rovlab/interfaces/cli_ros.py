@@ -25,6 +25,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                             "rovlab's series (JSON) in FILE.rovlab.mcap beside it")
         n.add_argument("--remap", action="append", default=[], metavar="FROM:=TO",
                        help="remap a topic, e.g. mocap/pose:=/qualisys/rov/pose (repeatable)")
+        if ros == "ros2":
+            from rovlab.interfaces.cli_mavlink import add_fly_arguments
+
+            add_fly_arguments(n)  # the plan flown at its start depth; a set-point or NS/fly/abort aborts it
         n.set_defaults(func=_cmd_node, ros=ros)
         s = what.add_parser("sim", help="a simulated vehicle in real time on the same topics")
         s.add_argument("--vehicle", default=None, help="vehicle name or TOML file (default: the scenario's)")
@@ -77,9 +81,16 @@ def _remaps(args: argparse.Namespace) -> list[str]:
 
 def _cmd_node(args: argparse.Namespace) -> int:
     remaps = _remaps(args)
+    fly = None
+    if getattr(args, "fly", None) is not None:
+        from rovlab.interfaces.cli_mavlink import load_flight
+        from rovlab.params.vehicle import load_vehicle
+
+        fly = load_flight(args, load_vehicle(args.vehicle).name)
     mod = _adapter(args.ros, args.namespace)
+    extra = {"fly": fly} if fly is not None else {}
     return int(mod.run_node(vehicle=args.vehicle, config=args.config, namespace=args.namespace,
-                            mocap_covariance=args.mocap_covariance, record=args.record, remaps=remaps))
+                            mocap_covariance=args.mocap_covariance, record=args.record, remaps=remaps, **extra))
 
 
 def _cmd_sim(args: argparse.Namespace) -> int:

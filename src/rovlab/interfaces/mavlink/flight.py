@@ -30,9 +30,8 @@ from typing import Any
 
 from rovlab.core.components import TRUTH_INDEX
 from rovlab.interfaces.mavlink.ardusub import MODE_NAMES, MODES
+from rovlab.interfaces.node.flight import END_NEUTRAL_S, START_SETTLE_S
 
-START_SETTLE_S = 2.0  # the depth within the start tolerance this long before the flight starts
-END_NEUTRAL_S = 1.0  # neutral commands sent this long after the flight ended, before the bridge stops
 # SERVO_OUTPUT_RAW asked at this rate for a flight: rovlab identify dive holds each PWM until the next
 # one, so at the control rate (10 Hz) the input it sees lags the thrust applied by up to a period
 SERVO_HZ = 50.0

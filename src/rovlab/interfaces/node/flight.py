@@ -30,6 +30,8 @@ from dataclasses import dataclass, fields, replace
 from typing import Any
 
 STATES = ("waiting", "flying", "complete", "aborted")
+START_SETTLE_S = 2.0  # an adapter starts the plan once the depth has been within the start tolerance this long
+END_NEUTRAL_S = 1.0  # neutral commands this long after the flight ended, before an adapter stops
 # accepted ranges of the guards (CLI options --fly-guard-*; ValueError outside)
 GUARD_RANGES: dict[str, tuple[float, float, str]] = {
     "depth_margin_m": (0.1, 5.0, "m"),
@@ -206,4 +208,4 @@ class PlanFlight:
         return text
 
 
-__all__ = ["GUARD_RANGES", "STATES", "FlightGuards", "PlanFlight"]
+__all__ = ["END_NEUTRAL_S", "GUARD_RANGES", "START_SETTLE_S", "STATES", "FlightGuards", "PlanFlight"]

@@ -95,6 +95,8 @@ class VehicleNode(_Ros2, rc.VehicleAdapter):
                                  self.guard("mocap/pose", self.on_mocap), qos_profile_sensor_data)
         node.create_subscription(Imu, rc.TOPICS["imu"], self.guard("imu", self.on_imu), qos_profile_sensor_data)
         node.create_subscription(PoseStamped, rc.TOPICS["setpoint"], self.guard("setpoint", self.on_setpoint), RELIABLE)
+        node.create_subscription(String, rc.TOPICS["abort"], self.guard("abort", lambda m: self.on_abort(m.data)),
+                                 RELIABLE)
         self.pub_odom = node.create_publisher(Odometry, rc.TOPICS["odometry"], RELIABLE)
         self.pub_wrench = node.create_publisher(WrenchStamped, rc.TOPICS["wrench"], RELIABLE)
         self.pub_pwm = node.create_publisher(Float64MultiArray, rc.TOPICS["pwm"], RELIABLE)
@@ -103,6 +105,9 @@ class VehicleNode(_Ros2, rc.VehicleAdapter):
         self._declare_parameters()
         node.add_on_set_parameters_callback(self._on_set_parameters)
         node.create_timer(core.h / 5.0, self.guard("timer", lambda: self.run(self.now())))
+
+    def request_stop(self) -> None:
+        signal.raise_signal(signal.SIGTERM)  # _spin stops (a flight ended)
 
     def publish_more(self, out: NodeOutput) -> None:
         if self.pub_msgs.get_subscription_count() > 0:  # the HMI (rovlab hmi --source ros2) listens
@@ -175,8 +180,9 @@ def _ros_args(remaps: list[str] | None) -> list[str]:
 
 
 def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance: bool = False,
-             record: str | None = None, remaps: list[str] | None = None) -> int:
-    """``rovlab ros2 node``."""
+             record: str | None = None, remaps: list[str] | None = None, fly: tuple[Any, Any] | None = None) -> int:
+    """``rovlab ros2 node`` (``fly``: a dive plan and its guards, flown then the node stops; 1 if
+    the flight aborted)."""
     from rovlab.interfaces.node.runtime import load_node
 
     core, table = load_node(vehicle, config, wait_for_samples_s=10.0)
@@ -187,10 +193,17 @@ def run_node(*, vehicle: str, config: str, namespace: str = "", mocap_covariance
         recorder = NodeRecorder(record, core, namespace=namespace)
     rclpy.init(args=_ros_args(remaps), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     vn = VehicleNode(core, table, namespace=namespace, mocap_covariance=mocap_covariance, recorder=recorder)
+    if fly is not None:
+        vn.fly(*fly)
     vn.info(f"rovlab node up: vehicle {core.vehicle.name}, configuration {core.config.name}, h = {core.h:g} s, "
             f"estimator {core.estimator_name}, controller {core.controller_name}; fusing "
-            + ", ".join(c.name for c in core.channels))
-    return _spin(vn.node, recorder.close if recorder is not None else None)
+            + ", ".join(c.name for c in core.channels) + ("; flying a dive plan" if fly is not None else ""))
+    _spin(vn.node, recorder.close if recorder is not None else None)
+    if vn.flight is not None and not vn.flight.ended:
+        vn.flight.abort("the node was stopped before the plan's end")
+        print(f"rovlab ros2 node: {vn.flight.summary()}", file=sys.stderr, flush=True)
+        vn.exit_code = 1
+    return vn.exit_code
 
 
 class SimNode(_Ros2, rc.SimAdapter):

@@ -37,12 +37,13 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from rovlab.core import frames
+from rovlab.core.components import TRUTH_INDEX
 from rovlab.interfaces.node.core import NodeCore, NodeOutput
 from rovlab.io import ros2msg
 
 TOPICS = {"pressure": "pressure", "mocap": "mocap/pose", "imu": "imu", "setpoint": "setpoint",
           "odometry": "odometry", "wrench": "wrench", "pwm": "thrusters/pwm_us", "diagnostics": "diagnostics",
-          "truth": "truth/odometry", "messages": "rovlab/messages"}
+          "truth": "truth/odometry", "messages": "rovlab/messages", "abort": "fly/abort"}
 WORLD_FRAME = ros2msg.WORLD_FRAME
 BODY_FRAME = ros2msg.BODY_FRAME
 SURFACE_PRESSURE_PA = 101325.0
@@ -192,7 +193,8 @@ def imu_samples(msg: Any) -> dict[str, float]:
     """Heading psi (when the orientation is given, REP-145: covariance[0] != -1) and yaw rate r
     (FRD) of a sensor_msgs/Imu in ENU / FLU."""
     out: dict[str, float] = {}
-    cov = list(getattr(msg, "orientation_covariance", []) or [])
+    raw = getattr(msg, "orientation_covariance", None)
+    cov = [] if raw is None else list(raw)  # rclpy gives a numpy array: no `or []` (its truth value raises)
     if not cov or cov[0] != -1.0:
         q = msg.orientation
         quat = [_finite(getattr(q, a), f"imu.orientation.{a}") for a in "xyzw"]
@@ -466,6 +468,8 @@ class VehicleAdapter(RosAdapter):
     pub_wrench: Any
     pub_pwm: Any
     pub_diag: Any
+    flight: Any = None  # a dive plan being flown (fly; rovlab.interfaces.node.flight.PlanFlight)
+    exit_code = 0  # 1: a flight aborted
 
     def setup(self, core: NodeCore, table: ParameterTable, recorder: Any = None) -> None:
         self.core, self.table, self.recorder = core, table, recorder
@@ -496,6 +500,11 @@ class VehicleAdapter(RosAdapter):
         self.push("imu", imu_samples(msg), self.stamp_seconds(msg.header.stamp, self.now()), "imu")
 
     def on_setpoint(self, msg: Any) -> None:
+        if self.flight is not None:  # someone else commands: a pilot takes over
+            if not self.flight.ended:
+                self.core.abort_flight(f"pilot input: a set-point on {TOPICS['setpoint']} (the set-point is not "
+                                       "held: the node goes neutral)")
+            return
         s = pose_samples(msg.pose, "setpoint.pose")
         if s["z"] < 0.0:
             raise MessageError(f"setpoint depth {s['z']:g} m (ENU z = {-s['z']:g}) is above the surface")
@@ -516,6 +525,78 @@ class VehicleAdapter(RosAdapter):
         outs = self.core.tick(now)
         if outs:
             self.publish(outs[-1])
+        if self.flight is not None:
+            self._fly(now)
+
+    # -- flying a dive plan (rovlab.interfaces.node.flight) ----------------------------------------
+    def fly(self, plan: Any, guards: Any = None) -> Any:
+        """Fly ``plan`` once the estimated depth is at its start depth (the depth controller takes
+        the vehicle there first); abort to neutral on the core's guards, a set-point or a message on
+        NS/fly/abort; stop the node END_NEUTRAL_S after the flight (:meth:`request_stop`)."""
+        self.flight = self.core.fly(plan, guards)
+        self._fly_phase = "waiting"
+        self._near_since: float | None = None
+        self._ended_at: float | None = None
+        return self.flight
+
+    def on_abort(self, text: str) -> None:
+        """A message on NS/fly/abort (std_msgs/String): abort the flight."""
+        if self.flight is not None:
+            self.core.abort_flight(f"abort message on {TOPICS['abort']}: {str(text)[:80]!r}")
+
+    def request_stop(self) -> None:
+        """Stop the node (a middleware's own way); after a flight ended."""
+
+    def _fly(self, now: float) -> None:
+        from rovlab.interfaces.node.flight import END_NEUTRAL_S, START_SETTLE_S
+
+        f, core = self.flight, self.core
+        if f.ended:
+            if self._fly_phase != "ended":
+                self._fly_phase, self._ended_at = "ended", now
+                core.disengage()
+                (self.info if f.state == "complete" else self.warn_now)(
+                    ("" if f.state == "complete" else "ABORTED TO NEUTRAL: ") + f.summary())
+                if f.state == "aborted":
+                    self.exit_code = 1
+            elif self._ended_at is not None and now - self._ended_at >= END_NEUTRAL_S:
+                self._ended_at = None
+                self.request_stop()
+            return
+        last = core.last
+        if f.active or last is None:
+            return
+        j = core.depth_channel()
+        if j is None or last.channel_status[j] not in ("ok", "recovering"):
+            return  # waiting for the depth sensor
+        z = float(last.nav[TRUTH_INDEX["z"]])
+        start, tol = f.plan.start_depth, f.guards.start_tolerance_m
+        if abs(z - start) <= tol:
+            if self._fly_phase == "waiting" or (self._near_since is not None and now - self._near_since >= START_SETTLE_S):
+                core.start_flight()
+                self._fly_phase = "flying"
+                lo, hi = f.depth_limits()
+                self.info(f"flying the plan: {f.plan.duration_s:.0f} s of {', '.join(f.plan.dofs)} excitation from "
+                          f"{z:.2f} m (abort outside {lo:.2f} .. {hi:.2f} m, beyond +-{f.guards.turns:g} turns or "
+                          f"{math.degrees(f.guards.yaw_rate_rad_s):.0f} deg/s, on a lost depth sensor, a set-point "
+                          f"or a message on {TOPICS['abort']})")
+            elif self._near_since is None:
+                self._near_since = now
+            return
+        self._near_since = None
+        if self._fly_phase == "waiting":
+            if "z" in core.references:
+                self._fly_phase = "descending"
+                self.info(f"going to the plan's start depth {start:g} m (now {z:.2f} m) with the depth controller "
+                          f"of {core.config.name}")
+                core.set_reference(z=start)
+            else:
+                self._fly_phase = "told"
+                self.info(f"bring the vehicle to the plan's start depth {start:g} m (now {z:.2f} m; "
+                          f"{core.config.name} has no depth controller)")
+
+    def warn_now(self, text: str) -> None:
+        self.warn("flight", text)
 
     def publish(self, out: NodeOutput) -> None:
         m = self.msgs
