@@ -811,6 +811,16 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | Non
 
         dofs = default_dofs(data)
     fits = {}
+    hfits: dict[str, DofFit] = {}
+    fit_data = data
+    if any(d in HORIZONTAL_DOFS for d in dofs) or "yaw" in dofs:
+        from rovlab.ident import horizontal
+
+        if any(d in HORIZONTAL_DOFS for d in dofs):  # first: yaw takes its X_udot - Y_vdot
+            hfits = horizontal.fit(data, vehicle, dofs, free, a, t_split, max_rel=max_rel)
+        if "yaw" in dofs and horizontal.has_horizontal(data):  # the Munk moment as a known yaw input
+            fit_data = horizontal.with_munk_moment(data, vehicle, hfits or horizontal.fit(
+                data, vehicle, HORIZONTAL_DOFS, free, a, t_split, max_rel=max_rel))
     for dof in dofs:
         if dof in HORIZONTAL_DOFS:  # below, together (rovlab.ident.horizontal)
             continue
@@ -818,15 +828,13 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | Non
             raise IdentificationError(f"DOF {dof!r}: identification from dives covers {', '.join(ALL_DOFS)} (surge and "
                                       "sway need position or velocity in the log)")
         chosen = free.get(dof, DEFAULT_FREE) if isinstance(free, Mapping) else (free or DEFAULT_FREE)
-        fits[dof] = fit_dof(data, dof, dof_model(vehicle, dof), a, t_split, free=chosen, max_rel=max_rel)
+        fits[dof] = fit_dof(fit_data, dof, dof_model(vehicle, dof), a, t_split, free=chosen, max_rel=max_rel)
     kept = tuple(d for d in fits if not fits[d].refused_dof)
-    pred = prediction_errors(data, {d: fits[d].model for d in kept}, {d: dof_model(vehicle, d) for d in kept},
+    pred = prediction_errors(fit_data, {d: fits[d].model for d in kept}, {d: dof_model(vehicle, d) for d in kept},
                              t_split, b, published=compare.models(vehicle, kept) if compare is not None else None)
-    if any(d in HORIZONTAL_DOFS for d in dofs):
-        from rovlab.ident import horizontal
-
-        fits, pred = horizontal.identify(data, vehicle, dofs, free, a, t_split, b, fits, pred, max_rel=max_rel)
-    notes = data.notes
+    if hfits:
+        fits, pred = horizontal.merge(data, vehicle, dofs, hfits, fits, pred, t_split, b)
+    notes = fit_data.notes
     depth = data.channel("heave", "position")
     if depth is not None and depth.y.size and abs(float(np.median(depth.y))) < 0.3:
         from rovlab.models.kinetics import hull_height
