@@ -500,8 +500,9 @@ class VehicleAdapter(RosAdapter):
         self.push("imu", imu_samples(msg), self.stamp_seconds(msg.header.stamp, self.now()), "imu")
 
     def on_setpoint(self, msg: Any) -> None:
-        if self.flight is not None:  # someone else commands: a pilot takes over
-            if not self.flight.ended:
+        flight = getattr(self, "flight", None)
+        if flight is not None:  # someone else commands: a pilot takes over
+            if not flight.ended:
                 self.core.abort_flight(f"pilot input: a set-point on {TOPICS['setpoint']} (the set-point is not "
                                        "held: the node goes neutral)")
             return
