@@ -70,7 +70,7 @@ def test_dp_through_the_bridge_holds_a_position_follows_a_step_and_disarms_on_ex
         assert wait_until(observer.armed_in_manual, 60.0), "\n".join(lines[-20:])
         # not held before EKF3 has a position (about 40 s after SITL's boot), and said why
         assert wait_until(lambda: _held(bridge), 75.0), "\n".join(lines[-20:])
-        assert any("POSITION: no ekf3_position" in line for line in lines) or bridge.position_problem is None
+        assert any("POSITION: no ekf3_position.x sample yet" in line for line in lines), "\n".join(lines[-20:])
         x0, y0 = float(bridge.core.reference[0]), float(bridge.core.reference[1])
         assert wait_until(lambda: abs(bridge.core.last.nav[2] - 1.0) < 0.1, 30.0), "did not reach 1 m"
         time.sleep(10.0)
@@ -84,7 +84,8 @@ def test_dp_through_the_bridge_holds_a_position_follows_a_step_and_disarms_on_ex
         drift10 = float(np.hypot(*(ne[np.searchsorted(ne[:, 0], t0 + 10.0), 1:] - ne[0, 1:])))
         print(f"\nrovlab DP on SITL, 30 s: horizontal RMS {rms * 100:.1f} cm about the set-point, {rms_mean * 100:.1f} cm "
               f"about its mean; drift after 10 s {drift10 * 100:.1f} cm")
-        assert rms < 0.5, rms
+        # measured (docs/mavlink.md): 4.3-5.2 cm; EKF3's own position is 2 cm RMS off SITL's truth
+        assert rms < 0.15, rms
         assert drift10 < 1.0, drift10  # ArduSub's autotest's criterion for its own POSHOLD
 
         # a few metres north-east
@@ -97,7 +98,8 @@ def test_dp_through_the_bridge_holds_a_position_follows_a_step_and_disarms_on_ex
         over = float(np.max((ne[:, 1] - x0) / 3.0))
         print(f"step 3 m north, 2 m east: after 25-30 s at {end[0] - x0:.2f} / {end[1] - y0:.2f} m, peak north "
               f"{over * 100:.0f} %")
-        assert np.hypot(end[0] - x0 - 3.0, end[1] - y0 - 2.0) < 0.5, end
+        assert np.hypot(end[0] - x0 - 3.0, end[1] - y0 - 2.0) < 0.25, end
+        assert over < 1.15, over  # measured 99-102 %
         assert observer.armed_in_manual()
     finally:
         bridge.stop()
