@@ -34,14 +34,15 @@ class Feeder:
         self.core = core
         self.k = 0
         self.rng = np.random.default_rng(0)
+        self.noise = 1e-3
 
     def step(self, z: float | None = 2.0, psi: float = 0.3, r: float = 0.0):
         c = self.core
         values = {"z": z, "psi": math.remainder(psi, 2 * math.pi), "r": r}
         for ch in c.channels:
-            v = values[ch.quantity]
+            v = values.get(ch.quantity, 0.0)  # x, y, u, v, w of a DVL vehicle: at rest
             if v is not None:
-                c.push(ch.sensor, ch.quantity, v + ch.offset + 1e-3 * self.rng.standard_normal(), self.k * c.h)
+                c.push(ch.sensor, ch.quantity, v + ch.offset + self.noise * self.rng.standard_normal(), self.k * c.h)
         outs = c.tick(self.k * c.h + c.collect_s + 1e-9)
         self.k += 1
         assert len(outs) == 1
@@ -142,3 +143,24 @@ def test_guards_and_plans_the_node_cannot_fly_are_refused(core, plan):
     with pytest.raises(ValueError, match="no plan loaded"):
         core.start_flight()
     assert FlightGuards().for_plan(plan).yaw_rate_rad_s == pytest.approx(2.0 * plan.settings["yaw_rate"])
+
+
+def test_a_surge_and_sway_plan_flies_on_the_estimated_position_or_is_refused(udrone_dvl, udrone_dp):
+    """A horizontal plan's Flyer needs the heading and the position (its heading law and box guard):
+    the node gives it the filter's estimate, and refuses the plan where the filter has no x, y."""
+    from rovlab.params.vehicle import load_vehicle
+
+    heavy_dvl = load_vehicle("bluerov2_heavy_dvl")
+    depth_only = NodeCore(heavy_dvl, load_design_config("bluerov2_heavy"), log=lambda msg: None)
+    with pytest.raises(ValueError, match="estimated position and heading"):
+        depth_only.fly(plan_dive(heavy_dvl, ("heave", "yaw", "surge"), 60.0, seed=1))
+    assert depth_only.flight is None
+    core = NodeCore(udrone_dvl, udrone_dp, log=lambda msg: None)
+    flight = core.fly(plan_dive(udrone_dvl, ("heave", "surge"), 30.0, seed=1))
+    feed = Feeder(core)
+    feed.noise = 1e-2
+    for _ in range(5):
+        feed.step(z=2.0)
+    core.start_flight()
+    surge = [feed.step(z=2.0).tau[0] for _ in range(100)]
+    assert flight.state == "flying" and np.ptp(surge) > 1.0  # the surge excitation is flown

@@ -379,6 +379,11 @@ class NodeCore:
         if self.depth_channel() is None:
             raise ValueError(f"the filter of {self.config.name} fuses no pressure depth: a dive plan's depth law and "
                              "guards need one")
+        nav = set(self.design.estimator.nav)
+        if getattr(plan, "horizontal", False) and not {"x", "y", "psi", "r"} <= nav:
+            raise ValueError(f"a surge and sway plan ({', '.join(plan.dofs)}) is flown on the estimated position and "
+                             f"heading; the filter of {self.config.name} estimates {', '.join(sorted(nav))} (a "
+                             "configuration with a DVL or a positioning system and x, y states flies it)")
         flight = PlanFlight(plan, guards, h=self.h)
         with self._lock:
             self._prepare_flight()
@@ -444,10 +449,15 @@ class NodeCore:
         assert j is not None
         sample = float(self._latest[j] - self.channels[j].offset)
         depth = sample if math.isfinite(sample) else float(self._nav[TRUTH_INDEX["z"]])
-        ctl.state[:] = self.flight.wrench(depth)
+        nav = self._nav  # the previous step's estimate (this step's wrench is needed before its correction)
+        if getattr(self.flight.plan, "horizontal", False):  # surge / sway: the heading law and the box guard
+            ctl.state[:] = self.flight.wrench(depth, heading=float(nav[TRUTH_INDEX["psi"]]),
+                                              rate=float(nav[TRUTH_INDEX["r"]]),
+                                              position=(float(nav[TRUTH_INDEX["x"]]), float(nav[TRUTH_INDEX["y"]])))
+        else:
+            ctl.state[:] = self.flight.wrench(depth)
         kernel(t, self.estimator, ctl, self.actuators, self._nav_of, y, present, self.reference, True, out, False)
         est = set(self.design.estimator.nav)
-        nav = self._nav
         status = status_label(int(self.estimator.ch[j, CH_STATUS]), int(self.estimator.ch[j, CH_REASON]))
         if not self.sensor_enabled.get(self.channels[j].sensor, True):
             status = "disabled"

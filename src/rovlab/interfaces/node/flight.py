@@ -130,10 +130,11 @@ class PlanFlight:
         self.start_k = k
         self.start_stamp = stamp
 
-    def wrench(self, depth: float) -> list[float]:
-        """The wrench [X, Y, Z, N] of the current step for the measured depth [m]."""
+    def wrench(self, depth: float, **horizontal: Any) -> list[float]:
+        """The wrench [X, Y, Z, N] of the current step for the measured depth [m] (and, for a surge
+        and sway plan, the estimated heading, rate and position: rovlab.ident.plan.Flyer.step)."""
         i = min(self.steps // self.per_command, len(self.plan.Z) - 1)
-        tau, guarded = self.flyer.step(i, depth)
+        tau, guarded = self.flyer.step(i, depth, **horizontal)
         self.guard_steps += int(guarded)
         return [float(v) for v in tau]
 
