@@ -201,7 +201,10 @@ def plan_depth_max(path: Path) -> float:
     (("duration_s = 60.0", "duration_s = -60.0"), "duration_s"),
     (("depth_max = 3.0", "depth_max = 0.5"), "depth_max"),
     (("vehicle = \"bluerov2_heavy\"", "vehicle = \"udrone\""), "the plan is for vehicle 'udrone'"),
-    (("start_depth = 2.0", "start_depth = 9.0"), "start_depth"),
+    (("start_depth = 2.0", "start_depth = 9.0"), "guard.start_depth: got 9.0"),
+    (("capacity_Z = [-", "capacity_Z = [20.0, -"), "guard.capacity_Z"),  # three numbers
+    (("capacity_N = [-30.1419,", "capacity_N = [1.0,"), "guard.capacity_N: got [1.0, 30.1419]"),
+    (("capacity_Z = [-205.9396, 159.6523]", "capacity_Z = [-20.0, 20.0]"), "excitation.Z"),  # levels up to 41 N
 ])
 def test_a_malformed_plan_is_refused_before_anything_is_flown(tmp_path, plan60, edit, expect):
     text = Path(plan60).read_text(encoding="utf-8")

@@ -564,6 +564,17 @@ def read_plan(path: str | Path) -> DivePlan:
     top.finish()
     if math.isfinite(dmin) and math.isfinite(dmax) and dmax <= dmin:
         col.add("guard.depth_max", dmax, f"a depth below depth_min ({dmin:g} m)")
+    elif math.isfinite(start) and not dmin <= start <= dmax:  # the flight starts there (the bridge's --fly)
+        col.add("guard.start_depth", start, f"a depth within the band {dmin:g} .. {dmax:g} m")
+    # what a flight commands is bounded by these: a capacity without its two signs, or an excitation beyond
+    # it, is another vehicle's plan or a hand edit (the bridge's --fly would command it)
+    for key, cap, values in (("Z", capz, zs), ("N", capn, ns)):
+        if np.all(np.isfinite(cap)) and not cap[0] < 0.0 < cap[1]:
+            col.add(f"guard.capacity_{key}", [float(c) for c in cap], "[most negative < 0, most positive > 0]")
+        elif np.all(np.isfinite(cap)) and values.size and np.all(np.isfinite(values)) \
+                and (values.min() < cap[0] or values.max() > cap[1]):
+            col.add(f"excitation.{key}", f"{values.min():g} .. {values.max():g}",
+                    f"values within guard.capacity_{key} ({cap[0]:g} .. {cap[1]:g})")
     if ts.size and not (ts.size == zs.size == ns.size):
         col.add("excitation", f"{ts.size}, {zs.size}, {ns.size} values", "t_s, Z and N of one length")
     elif ts.size and (np.any(np.diff(ts) <= 0) or ts[0] != 0.0):

@@ -161,9 +161,6 @@ def load_flight(args: argparse.Namespace, vehicle_name: str) -> tuple[Any, Any] 
         raise UserError(f"--fly {args.fly}: the plan is for vehicle {plan.vehicle!r}, this is {vehicle_name!r}: its trim "
                         f"and thrust limits are another vehicle's (rovlab lab plan-dive --vehicle {vehicle_name} plans "
                         "one for it)")
-    if not plan.depth_min <= plan.start_depth <= plan.depth_max:
-        raise UserError(f"--fly {args.fly}: guard.start_depth = {plan.start_depth:g} m is outside the plan's depth band "
-                        f"{plan.depth_min:g} .. {plan.depth_max:g} m")
     return plan, guards
 
 
