@@ -178,7 +178,7 @@ class MavlinkBridge:
             self._streams[POSITION_STREAM[0]] = POSITION_STREAM[1]
         self.position_problem: str | None = None  # the position's problem now (None: none needed, or fused)
         self._last_bad_position: str | None = None
-        self._position_seen = False  # a position sample was fused
+        self._position_fused = False  # a step of the filter has used a position sample
         self.counts["implausible_position"] = 0
         self.rate_wanted = {name: 1.0 / self.core.h for name in self._streams}
         self.rates: dict[str, float | None] = dict.fromkeys(self._streams)  # measured [Hz]; None before a full window
@@ -295,6 +295,8 @@ class MavlinkBridge:
         wall = time.time()
         drain(self.conn, lambda msg: self._handle(msg, now, wall), self.counts, self._warn_once)  # bounded per call
         for out in self.core.tick(now):
+            if not self._position_fused and any(math.isfinite(out.y[j]) for j in self._position_channels):
+                self._position_fused = True  # x, y are the position's from here on, not the initial state's
             msgs = out.messages(outputs=("X", "Y", "Z", "N") if self.dp else ("Z", "N"))
             self._queue.extend(msgs)
             if self.recorder is not None:
@@ -394,15 +396,18 @@ class MavlinkBridge:
             return
         problem = kind = self._last_bad_position
         last = self.core.last
-        if problem is None and last is not None:
+        if problem is None:
             for j in self._position_channels:
-                label = last.channel_status[j]
-                if label in ("ok", "recovering"):
-                    continue
+                label = "none" if last is None else last.channel_status[j]
                 c = self.core.channels[j]
-                if not self._position_seen:
+                if not self._position_fused:  # x, y are still the initial state (the channel says 'ok' at first)
                     problem = kind = (f"no {c.name} sample yet (LOCAL_POSITION_NED: the vehicle's EKF has no position; "
                                       "ArduSub SITL: about 40 s after boot, when EKF3 uses its GPS)")
+                elif label == "ok":
+                    continue
+                elif label == "recovering":  # a hold (re)starting now would take a half-corrected estimate as x, y
+                    problem = kind = (f"{c.name} is back and the filter takes it in over its recovery time "
+                                      "(x and y are not yet the position's)")
                 else:
                     problem = kind = f"the filter has lost {c.name} ({label}): x and y would be a prediction"
                 break
@@ -495,7 +500,6 @@ class MavlinkBridge:
         if kind in ("LOCAL_POSITION_NED", "VISION_POSITION_ESTIMATE") and self._position_channels:
             if not self._plausible_position(kind, fields):
                 return
-            self._position_seen = True
         for column, value in self.smap.samples(kind, fields).items():
             sensor, quantity = self._sample_of[column]
             self.core.push(sensor, quantity, value, now)
