@@ -42,6 +42,13 @@ PLAUSIBLE_DEPTH_M, e.g. ArduSub SITL started at a home 584 m above sea level rep
 -57 600 hPa) or whose channel the filter has lost stops the control loudly -- the value is named,
 and no depth is ever flown on the filter's prediction: neutral inputs, as ArduSub's own
 failsafes do -- until it reads plausibly again.
+
+With a dynamic-positioning configuration (a controller whose references include x and y) the
+bridge also holds north and east (``set_reference(x=, y=)``) on the position channels its filter
+fuses, fed by LOCAL_POSITION_NED (asked for at the control rate). It holds them only on a measured
+position: not before a step of the filter has used a position sample, not on an implausible one
+(PLAUSIBLE_POSITION_M) and not while the channel is lost or recovering -- said, neutral inputs,
+the set-point kept (docs/mavlink.md, "Dynamic positioning on ArduSub SITL").
 """
 
 from __future__ import annotations
