@@ -77,6 +77,8 @@ class BridgeFlight:
         b = self.bridge
         if self._pilot is not None:
             return self._pilot
+        if not b.vehicle_seen:
+            return f"no vehicle seen yet on {b.connect} (no HEARTBEAT of system {b.target_system})"
         if b.vehicle_problems != []:
             return "the vehicle file is not checked against the vehicle yet"
         if b.telemetry_lost(now):
