@@ -568,13 +568,13 @@ def read_plan(path: str | Path) -> DivePlan:
         col.add("guard.start_depth", start, f"a depth within the band {dmin:g} .. {dmax:g} m")
     # what a flight commands is bounded by these: a capacity without its two signs, or an excitation beyond
     # it, is another vehicle's plan or a hand edit (the bridge's --fly would command it)
-    for key, cap, values in (("Z", capz, zs), ("N", capn, ns)):
-        if np.all(np.isfinite(cap)) and not cap[0] < 0.0 < cap[1]:
-            col.add(f"guard.capacity_{key}", [float(c) for c in cap], "[most negative < 0, most positive > 0]")
-        elif np.all(np.isfinite(cap)) and values.size and np.all(np.isfinite(values)) \
-                and (values.min() < cap[0] or values.max() > cap[1]):
+    for key, bounds, values in (("Z", capz, zs), ("N", capn, ns)):
+        if np.all(np.isfinite(bounds)) and not bounds[0] < 0.0 < bounds[1]:
+            col.add(f"guard.capacity_{key}", [float(c) for c in bounds], "[most negative < 0, most positive > 0]")
+        elif np.all(np.isfinite(bounds)) and values.size and np.all(np.isfinite(values)) \
+                and (values.min() < bounds[0] or values.max() > bounds[1]):
             col.add(f"excitation.{key}", f"{values.min():g} .. {values.max():g}",
-                    f"values within guard.capacity_{key} ({cap[0]:g} .. {cap[1]:g})")
+                    f"values within guard.capacity_{key} ({bounds[0]:g} .. {bounds[1]:g})")
     if ts.size and not (ts.size == zs.size == ns.size):
         col.add("excitation", f"{ts.size}, {zs.size}, {ns.size} values", "t_s, Z and N of one length")
     elif ts.size and (np.any(np.diff(ts) <= 0) or ts[0] != 0.0):
