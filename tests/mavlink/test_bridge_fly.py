@@ -102,7 +102,7 @@ def sim_port():
     stop(sim)
 
 
-def _flying_bridge(port: int, plan_path: Path, **guards):
+def _flying_bridge(port: int, plan_path: Path, record: Path | None = None, **guards):
     """An in-process bridge flying the plan (armed by it) once it is under way."""
     from rovlab.ident.plan import read_plan
     from rovlab.interfaces.mavlink.bridge import MavlinkBridge
@@ -112,7 +112,8 @@ def _flying_bridge(port: int, plan_path: Path, **guards):
 
     lines: list[str] = []
     bridge = MavlinkBridge(load_vehicle("bluerov2_heavy"), load_design_config("bluerov2_heavy"),
-                           connect=f"udpin:127.0.0.1:{port}", arm=True, log=lines.append)
+                           connect=f"udpin:127.0.0.1:{port}", arm=True, log=lines.append,
+                           record=None if record is None else str(record))
     bridge.fly(read_plan(plan_path), FlightGuards(**guards))
     thread = threading.Thread(target=bridge.run, daemon=True)
     thread.start()
@@ -164,6 +165,26 @@ def test_another_ground_stations_sticks_abort_the_flight(sim_port, plan60):
     finally:
         pilot.close()
     _aborted_to_neutral(bridge, thread, lines, "pilot input: MANUAL_CONTROL from system 200")
+
+
+def test_stopping_the_bridge_mid_flight_aborts_and_the_recording_says_so(sim_port, plan60, tmp_path):
+    """Ctrl-C (stop) during the flight: aborted, said, recorded as the recording's last flight event,
+    exit status 1; the recording stays readable by identify dive's reader."""
+    from rovlab.interfaces.mavlink.logs import read_records
+    from rovlab.io.timeseries import read_mcap_json
+
+    port, _ = sim_port
+    record = tmp_path / "stopped.mcap"
+    bridge, thread, lines = _flying_bridge(port, plan60, record)
+    bridge.stop()
+    thread.join(10.0)
+    assert not thread.is_alive()
+    flight = bridge.flight.flight
+    assert flight.state == "aborted" and "stopped before the plan's end" in flight.reason
+    assert bridge.exit_code == 1 and any(line.startswith("ABORTED TO NEUTRAL") for line in lines), lines
+    events = [m for topic, _t, m in read_mcap_json(record, prefix="/rovlab/flight")]
+    assert [e["event"] for e in events] == ["start", "aborted"] and "stopped" in events[-1]["reason"]
+    assert {"SERVO_OUTPUT_RAW", "SCALED_PRESSURE2", "ATTITUDE"} <= {k for _, k, _ in read_records(record)}
 
 
 def test_lost_telemetry_aborts_the_flight(sim_port, plan60):

@@ -447,12 +447,6 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
     print(f"rovlab mavlink bridge: stopped ({c['received']} messages in, {c['commands']} commands out, "
           f"{c['failsafes']} telemetry failsafes)" + (f"; recording: {args.record}" if args.record else ""),
           file=sys.stderr, flush=True)
-    if bridge.flight is not None:
-        f = bridge.flight.flight
-        if not f.ended:  # stopped (Ctrl-C, --duration) before the plan's end
-            f.abort("the bridge was stopped before the plan's end" if f.active else "the bridge was stopped before the "
-                    "flight started")
-            log(("ABORTED TO NEUTRAL: " if f.steps else "") + f.summary())
-            bridge.exit_code = bridge.exit_code or 1
+    # (a flight stopped before its end was aborted, said and recorded by the bridge's close)
     # 2: the vehicle file disagreed with the vehicle's parameters (said above); 1: a flight aborted
     return bridge.exit_code

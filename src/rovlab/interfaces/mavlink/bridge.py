@@ -290,6 +290,8 @@ class MavlinkBridge:
         except OSError:  # pragma: no cover - the link is gone; nothing more to say to the vehicle
             pass
         finally:
+            if self.flight is not None:
+                self.flight.closing()  # stopped mid-flight: the abort said and recorded before the recording ends
             if self.recorder is not None:
                 self.recorder.close()
             try:

@@ -64,6 +64,20 @@ class BridgeFlight:
             self._pilot = (f"pilot input: {msg.get_type()} from system {msg.get_srcSystem()} on the link (another "
                            "ground station's joystick)")
 
+    def closing(self) -> None:
+        """The bridge closes (Ctrl-C, --duration, an error) before the flight ended: abort it, say so
+        and record it, so the recording says why it stops where it does."""
+        f = self.flight
+        if f.ended:
+            return
+        f.abort("the bridge was stopped before the plan's end" if f.active
+                else "the bridge was stopped before the flight started")
+        self.phase = "ended"
+        self.bridge.log(("ABORTED TO NEUTRAL: " if f.steps else "") + f.summary())
+        self._record(f.state, time.time())
+        if self.bridge.exit_code == 0:
+            self.bridge.exit_code = 1
+
     def _record(self, event: str, wall: float) -> None:
         rec = self.bridge.recorder
         if rec is not None:
