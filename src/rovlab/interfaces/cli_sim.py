@@ -130,7 +130,8 @@ def _compile_node_steps(args: argparse.Namespace) -> None:
         seen.add(key)
         started = time.perf_counter()
         print(f"node control step {c.estimator} + {c.controller} ({c.name}) ...", end="", flush=True)
-        NodeCore(v, c, log=lambda msg: print(f"\n  {msg}", end="", flush=True))
+        core = NodeCore(v, c, log=lambda msg: print(f"\n  {msg}", end="", flush=True))
+        core.prepare_flight()  # and the step that flies a dive plan (--fly) with this estimator
         print(f" {time.perf_counter() - started:.1f} s")
 
 

@@ -386,7 +386,7 @@ class NodeCore:
                              "configuration with a DVL or a positioning system and x, y states flies it)")
         flight = PlanFlight(plan, guards, h=self.h)
         with self._lock:
-            self._prepare_flight()
+            self.prepare_flight()
             self.flight = flight
         return flight
 
@@ -408,8 +408,9 @@ class NodeCore:
             self.flight.abort(reason, None if self.t0 is None else self.t0 + self.k * self.h)
             return flying
 
-    def _prepare_flight(self) -> None:
-        """The open-loop controller, its compiled step (warmed up on copies) and its outputs."""
+    def prepare_flight(self) -> None:
+        """The open-loop controller, its compiled step (warmed up on copies: compiled ahead by
+        ``rovlab compile --node``) and its outputs; :meth:`fly` calls it."""
         from rovlab.control.open_loop import open_loop
         from rovlab.sim.step import StepOut, control_step_for
 
