@@ -812,6 +812,7 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | Non
         dofs = default_dofs(data)
     fits = {}
     hfits: dict[str, DofFit] = {}
+    munk: dict[str, DofFit] = {}  # the surge / sway fits whose X_udot - Y_vdot the yaw input uses
     fit_data = data
     if any(d in HORIZONTAL_DOFS for d in dofs) or "yaw" in dofs:
         from rovlab.ident import horizontal
@@ -819,8 +820,8 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | Non
         if any(d in HORIZONTAL_DOFS for d in dofs):  # first: yaw takes its X_udot - Y_vdot
             hfits = horizontal.fit(data, vehicle, dofs, free, a, t_split, max_rel=max_rel)
         if "yaw" in dofs and horizontal.has_horizontal(data):  # the Munk moment as a known yaw input
-            fit_data = horizontal.with_munk_moment(data, vehicle, hfits or horizontal.fit(
-                data, vehicle, HORIZONTAL_DOFS, free, a, t_split, max_rel=max_rel))
+            munk = hfits or horizontal.fit(data, vehicle, HORIZONTAL_DOFS, free, a, t_split, max_rel=max_rel)
+            fit_data = horizontal.with_munk_moment(data, vehicle, munk)
     for dof in dofs:
         if dof in HORIZONTAL_DOFS:  # below, together (rovlab.ident.horizontal)
             continue
@@ -829,6 +830,10 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | Non
                                       "sway need position or velocity in the log)")
         chosen = free.get(dof, DEFAULT_FREE) if isinstance(free, Mapping) else (free or DEFAULT_FREE)
         fits[dof] = fit_dof(fit_data, dof, dof_model(vehicle, dof), a, t_split, free=chosen, max_rel=max_rel)
+        if dof == "yaw" and munk:  # the Munk moment's X_udot - Y_vdot is uncertain too
+            fits[dof] = horizontal.with_munk_uncertainty(
+                fits[dof], data, vehicle, munk,
+                lambda d, c=chosen: fit_dof(d, "yaw", dof_model(vehicle, "yaw"), a, t_split, free=c, max_rel=max_rel))
     kept = tuple(d for d in fits if not fits[d].refused_dof)
     pred = prediction_errors(fit_data, {d: fits[d].model for d in kept}, {d: dof_model(vehicle, d) for d in kept},
                              t_split, b, published=compare.models(vehicle, kept) if compare is not None else None)
@@ -842,7 +847,7 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | Non
         notes += (f"the depth stays near the surface (median {float(np.median(depth.y)):.3g} m; the free surface cuts "
                   f"the hull above {0.5 * hull_height(vehicle):.2f} m): a surface log; heave and yaw are identified "
                   "below 1 m (rovlab lab plan-dive keeps the vehicle there)",)
-    if "yaw" in kept and not any(d in HORIZONTAL_DOFS for d in fits):
+    if "yaw" in kept and fit_data is data:  # no surge/sway velocity in the log: the Munk moment left out
         notes += _horizontal_thrust_note(data, a, t_split)
     return DiveFit(data.file, fits, (a, t_split), (t_split, b), pred, notes, compare)
 

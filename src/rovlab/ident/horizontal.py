@@ -593,7 +593,8 @@ def body_velocity(data: _d.DiveData, t: np.ndarray) -> tuple[np.ndarray, np.ndar
     return c * vn + s * ve, -s * vn + c * ve
 
 
-def with_munk_moment(data: _d.DiveData, vehicle: Any, hfits: Mapping[str, _d.DofFit]) -> _d.DiveData:
+def with_munk_moment(data: _d.DiveData, vehicle: Any, hfits: Mapping[str, _d.DofFit], *,
+                     shift: float = 0.0) -> _d.DiveData:
     """The dive with the Munk moment -(X_udot - Y_vdot) u v added to the yaw input tau_N (the yaw row
     of rovlab.models.kinetics's C_A(nu) nu; C_RB's cancels for r_g = 0): a known input where the log
     carries surge and sway velocity, with X_udot and Y_vdot as identified from the same log (also
@@ -612,7 +613,37 @@ def with_munk_moment(data: _d.DiveData, vehicle: Any, hfits: Mapping[str, _d.Dof
         am[dof] = (f.param("added_mass").estimate if f is not None and not f.refused_dof
                    else float(vehicle.added_mass[_d._DOF_INDEX[dof]]))
     tau = np.array(data.tau, dtype=float, copy=True)
-    tau[:, 3] -= (am["surge"] - am["sway"]) * vel[0] * vel[1]
+    tau[:, 3] -= (am["surge"] - am["sway"] + shift) * vel[0] * vel[1]
     note = (f"yaw input: with the Munk moment -(X_udot - Y_vdot) u v, X_udot - Y_vdot = {am['surge'] - am['sway']:.4g} "
             "kg, u and v from the log")
     return replace(data, tau=tau, notes=data.notes + (note,))
+
+
+def with_munk_uncertainty(yaw: _d.DofFit, data: _d.DiveData, vehicle: Any, hfits: Mapping[str, _d.DofFit],
+                          refit: Any) -> _d.DofFit:
+    """The yaw fit with the uncertainty of the Munk moment's X_udot - Y_vdot carried into its
+    sigmas: yaw refitted (``refit(data)``) with X_udot - Y_vdot one standard deviation larger
+    (sqrt(sigma_Xudot^2 + sigma_Yvdot^2), the two fits' estimates taken as independent), and each
+    estimated parameter's sigma^2 increased by the square of its change (first order). Without
+    an estimated X_udot or Y_vdot (the file's used) nothing is added: their error is unknown."""
+    from dataclasses import replace
+
+    var = 0.0
+    for dof in HORIZONTAL:
+        f = hfits.get(dof)
+        if f is not None and not f.refused_dof and f.param("added_mass").status == "estimated":
+            var += f.param("added_mass").sigma ** 2
+    if yaw.refused_dof or not var > 0:
+        return yaw
+    sk = math.sqrt(var)
+    other = refit(with_munk_moment(data, vehicle, hfits, shift=sk))
+    if other.refused_dof:
+        return yaw
+    params = []
+    for p in yaw.params:
+        q = other.param(p.key)
+        if p.status == "estimated" and q.status == "estimated":
+            d = q.estimate - p.estimate
+            p = replace(p, sigma=math.hypot(p.sigma, d))
+        params.append(p)
+    return replace(yaw, params=tuple(params))

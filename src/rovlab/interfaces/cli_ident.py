@@ -146,10 +146,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="accept channels that do not look like noise at rest (steps, a staircase, wandering)")
     p.set_defaults(func=_cmd_noise)
 
-    p = isub.add_parser("dive", help="heave and yaw added mass, damping and net buoyancy from a dive log (issue 29)",
+    p = isub.add_parser("dive", help="heave and yaw (and surge and sway with a DVL or a position) added mass, "
+                                     "damping and net buoyancy from a dive log (issue 29)",
                         description="Output-error identification of heave and yaw from the vehicle's own log: the "
                                     "commanded PWM through the vehicle's thrust curves as input, depth, heading and yaw "
-                                    "rate as outputs. LOG: a CSV (time_s, pwm_<thruster> or tau_Z/tau_N, "
+                                    "rate as outputs; surge and sway too where the log carries a DVL's u, v or a "
+                                    "position's x, y (the vehicle file's dvl or motion_capture sensor; "
+                                    "LOCAL_POSITION_NED in a MAVLink log). LOG: a CSV (time_s, pwm_<thruster> or tau_Z/tau_N, "
                                     "<channel>_<sensor> columns, as rovlab lab dive and rovlab mavlink convert write "
                                     "them), a .tlog, a .BIN or a recorded .mcap. Reports each parameter's estimate, "
                                     "standard deviation and correlations, refuses what the log does not determine, and "
@@ -274,7 +277,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = lsub.add_parser("dive", parents=[lcommon], help="fly a dive plan on a hidden vehicle (issue 29)",
                         description="Fly a plan (rovlab lab plan-dive) on a hidden 'true' vehicle with the process "
                                     "model, the thrusters (PWM quantised to 1 us, dead band) and a BlueROV2's sensors "
-                                    "(depth at 2 Hz, smoothed AHRS heading and yaw rate at 20 Hz); the log is what "
+                                    "(depth at 2 Hz, smoothed AHRS heading and yaw rate at 20 Hz; a DVL or positioning "
+                                    "system at its file's rate and variance); the log is what "
                                     "rovlab identify dive reads. The truth goes into the file's JSON sidecar.")
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--plan", metavar="PLAN.toml", help="the plan to fly (rovlab lab plan-dive)")
