@@ -40,6 +40,11 @@ def test_north_east_need_a_controller_that_holds_them():
         with pytest.raises(ValueError, match="north/east set-points need a controller that holds x and y"):
             bridge.set_reference(z=1.0, x=2.0)
         assert not bridge.engaged  # nothing changed
+        from rovlab.interfaces.mavlink.source import MavlinkSource
+
+        source = MavlinkSource(bridge, start=False)  # the HMI's north/east set-points go the same way
+        with pytest.raises(ValueError, match="north/east set-points need a controller"):
+            source.set_reference(z=1.0, y=2.0)
     finally:
         bridge.close()
     for extra, said in ((["--depth", "1", "--north", "2"], "holds z, psi, no north/east set-point"),
@@ -111,6 +116,10 @@ def test_a_dp_hold_waits_for_a_plausible_position_and_stops_when_it_is_lost():
         assert bridge.core.reference[0] == pytest.approx(1.0, abs=0.2)
         assert bridge.core.reference[1] == pytest.approx(2.0, abs=0.2)
         assert any("holding north" in line for line in lines), lines[-5:]
+        from rovlab.interfaces.mavlink.source import MavlinkSource
+
+        ref = MavlinkSource(bridge, start=False).status()["reference"]  # what the HMI shows as north/east
+        assert (ref["x"], ref["y"]) == (bridge.core.reference[0], bridge.core.reference[1])
 
         # the position stops (EKF3 lost it): the filter times the channel out and the hold stops
         position[0] = None

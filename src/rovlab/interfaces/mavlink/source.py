@@ -63,7 +63,8 @@ class MavlinkSource:
         core, br = self.bridge.core, self.bridge
         return {
             "time_s": core.time,
-            "reference": {"z": float(core.reference[2]), "psi": float(core.reference[3]), "schedule": False},
+            "reference": {"z": float(core.reference[2]), "psi": float(core.reference[3]), "x": float(core.reference[0]),
+                          "y": float(core.reference[1]), "schedule": False},  # x, y: held with a DP configuration
             "engaged": bool(br.engaged),  # a set-point is wanted (held while the vehicle obeys: vehicle.holding)
             "sensors": dict(core.sensor_enabled),
             "filter_modes": core.filter_modes(),
