@@ -167,6 +167,16 @@ def test_another_ground_stations_sticks_abort_the_flight(sim_port, plan60):
     _aborted_to_neutral(bridge, thread, lines, "pilot input: MANUAL_CONTROL from system 200")
 
 
+def test_a_set_point_during_the_flight_aborts_it(sim_port, plan60):
+    """A set-point given to the bridge (the HMI's, a script's) while the plan flies: someone else
+    commands; abort to neutral, and the set-point is not held afterwards."""
+    port, _ = sim_port
+    bridge, thread, lines = _flying_bridge(port, plan60)
+    bridge.set_reference(z=1.5)
+    _aborted_to_neutral(bridge, thread, lines, "a set-point was given")
+    assert not bridge.engaged and not bridge.core.engaged
+
+
 def test_stopping_the_bridge_mid_flight_aborts_and_the_recording_says_so(sim_port, plan60, tmp_path):
     """Ctrl-C (stop) during the flight: aborted, said, recorded as the recording's last flight event,
     exit status 1; the recording stays readable by identify dive's reader."""

@@ -111,6 +111,8 @@ class BridgeFlight:
         f = self.flight
         if self.phase == "flying" and not f.ended:
             why = self._why_not(now)
+            if why is None and b.engaged:  # a set-point (the HMI, a script) during the flight: someone else commands
+                why = "pilot input: a set-point was given to the bridge (the HMI or a script); it is dropped"
             if why is not None:
                 b.core.abort_flight(why)
         if f.ended and self.phase != "ended":
