@@ -424,7 +424,7 @@ class MavlinkBridge:
             self._say_limited("position", f"POSITION: {problem}; no position control on a predicted position: "
                                           "neutral commands", now, key_text=kind)
         elif self.position_problem is not None:
-            self._say_limited("position-back", "position plausible and fused again", now)
+            self._say_limited("position-back", "position plausible and fused: x and y can be held", now)
         self.position_problem = problem
 
     def _plausible_position(self, kind: str, fields: dict[str, Any]) -> bool:
@@ -670,6 +670,8 @@ class MavlinkBridge:
         for name, wanted in self.rate_wanted.items():
             if now - self._asked_at[name] < RATE_WINDOW_S:
                 continue  # a full window after the last request
+            if name == POSITION_STREAM[0] and not self._position_fused:
+                continue  # ArduSub sends it once its EKF has a position (the interval asked for stands): said there
             arrivals = self._arrivals[name]
             rate = sum(1 for t in arrivals if t > now - RATE_WINDOW_S) / RATE_WINDOW_S
             self.rates[name] = rate
