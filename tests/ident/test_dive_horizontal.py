@@ -10,8 +10,10 @@ docs/identification.md ("Surge and sway"); the slow test below repeats them.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -281,3 +283,34 @@ def test_surge_sway_sigmas_are_honest_over_many_seeds(dvl):
     assert set(inside) == set(HORIZ)
     for name, hits in inside.items():
         assert np.mean(hits) >= 0.9, (name, np.mean(hits))
+
+
+DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "ardusub"
+
+
+@pytest.mark.slow  # ~25 s: the refusals refit a log that determines nothing
+@pytest.mark.skipif(importlib.util.find_spec("pymavlink") is None or not (DATA / "small.tlog").is_file(),
+                    reason="needs pymavlink and ../shared/data/ardusub/small.tlog")
+def test_the_real_surface_log_gives_position_but_determines_no_surge_or_sway(tmp_path):
+    """small.tlog (ArduSub 4.1, BlueROV2 Heavy at the surface) carries LOCAL_POSITION_NED: read as
+    a position where the vehicle file declares one, and surge and sway are refused whole (one
+    short forward command is no manoeuvre). (With the packaged file, which declares no such
+    sensor, they are refused before any fit: test_a_log_without_position_or_velocity_...)"""
+    from rovlab.interfaces.cli_ident import read_dive_log
+
+    path = tmp_path / "heavy_pos.toml"
+    path.write_text(packaged_vehicle_path("bluerov2_heavy").read_text(encoding="utf-8") + """
+[[sensors]]
+name = "ekf"
+kind = "motion_capture"
+source = "ArduSub's LOCAL_POSITION_NED; variance ASSUMED (0.1 m)^2"
+position = [0.0, 0.0, 0.0]
+rate_hz = 3.0
+variance = { x = 1.0e-2, y = 1.0e-2 }
+""", encoding="utf-8")
+    vehicle = load_vehicle(path)
+    data = read_dive_log(DATA / "small.tlog", vehicle)
+    assert data.channel("north", "position") is not None and data.channel("north", "position").t.size > 500
+    fit = dive.identify_dive(data, vehicle, dofs=("surge", "sway"))
+    for dof in ("surge", "sway"):
+        assert fit.fits[dof].refused_dof and f"plan-dive --dofs {dof}" in fit.fits[dof].refused_dof

@@ -41,6 +41,7 @@ HORIZONTAL = ("surge", "sway")
 OUTPUT_DOFS = ("surge", "sway", "north", "east")  # Channel.dof of u, v (DVL) and x, y (position)
 _STATE = {("surge", "velocity"): 2, ("sway", "velocity"): 3, ("north", "position"): 0, ("east", "position"): 1}
 SPEED_FLOOR = 0.03  # m/s: below this largest speed a DOF is not excited
+HOPELESS = 1.0 / _d.MAX_REL  # a parameter whose sigma exceeds this many refusal thresholds is refused at once
 
 
 def has_horizontal(data: _d.DiveData) -> bool:
@@ -393,17 +394,18 @@ def fit_horizontal(data: _d.DiveData, start: Mapping[str, _d.DofModel], dofs: Se
         sig = np.sqrt(var)
         cov_hac = max(covs, key=lambda c: float(np.trace(c / np.maximum(var, 1e-300))))
         models = prob.models(theta)
-        worst, worst_ratio = None, 1.0
-        for i, (d, k) in enumerate(cur):
-            ratio = _d._determination(k, models[d], sig[i], stats[d][0], max_rel)
-            if ratio > worst_ratio:
-                worst, worst_ratio = (d, k), ratio
-        if worst is None:
+        # refuse the worst-determined parameter and fit again without it; those hopeless (sigma
+        # above HOPELESS times the threshold: more than what they do) go at once, which saves the
+        # refits of a log that determines nothing (the real surface log: 40 s -> a few)
+        ratios = [_d._determination(k, models[d], sig[i], stats[d][0], max_rel) for i, (d, k) in enumerate(cur)]
+        worst_i = int(np.argmax(ratios))
+        if not ratios[worst_i] > 1.0:
             break
-        d, k = worst
-        held[worst] = (f"not determined by this log (sigma {sig[cur.index(worst)]:.3g}, {worst_ratio * max_rel * 100:.0f} "
-                       f"% of what it does); held at the file's value; to determine it: "
-                       f"{_d._manoeuvre(d, k, stats[d][0])}")
+        for i, ratio in enumerate(ratios):
+            if i == worst_i or ratio > HOPELESS:
+                d, k = cur[i]
+                held[(d, k)] = (f"not determined by this log (sigma {sig[i]:.3g}, {ratio * max_rel * 100:.0f} % of what "
+                                f"it does); held at the file's value; to determine it: {_d._manoeuvre(d, k, stats[d][0])}")
     raw = prob.residuals(theta, np.ones(len(prob.channels)))
     for dof in sorted({d for d, _ in keys}, key=HORIZONTAL.index):
         idx = [i for i, (d, _) in enumerate(cur) if d == dof]
