@@ -861,6 +861,9 @@ def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
         data = {"plan": args.out, "vehicle": v.name, "dofs": list(plan.dofs), "duration_s": plan.duration_s,
                 "depth_band_m": [plan.depth_min, plan.depth_max], "amplitude": plan.settings.get("amplitude"),
                 "capacity": {k: list(c) for k, c in plan.capacity.items()},
+                "horizontal_guard": ({"box_m": plan.box_m, "position_gain": plan.position_gain,
+                                      "heading_gain": plan.heading_gain, "heading_damping": plan.heading_damping}
+                                     if plan.horizontal else None),
                 "expected": [{"parameter": e.name, "dof": e.dof, "guess": e.guess, "sigma": e.sigma,
                               "percent": e.percent if math.isfinite(e.percent) else None} for e in expected],
                 "next": nxt}
@@ -881,9 +884,13 @@ def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
         print(f"  {e.name:10s} {e.guess:12.5g} {e.sigma:12.3g} {pct}  {e.unit}")
     print("  (the heading's AHRS errors counted as correlated over 0.5 s; a guess of 0 has no percentage)")
     if plan.horizontal:
-        print(f"  surge/sway: in every other 40 s period, the yaw excitation off and the heading held (gain "
+        when = "in every other 40 s period, the yaw excitation off" if "yaw" in plan.dofs else "throughout"
+        print(f"  surge/sway: {when} and the heading held (gain "
               f"{plan.heading_gain:g} N m/rad, damping {plan.heading_damping:g} N m s/rad); box {plan.box_m:g} m about "
               f"the start (position law {plan.position_gain:g} N/m)")
+        print("  (surge/sway sigmas count the DVL's or position's noise only: with a quiet DVL the surge/sway force "
+              "noise dominates, and the fit's sigmas were 6-16 times these on bluerov2_heavy_dvl; "
+              "docs/identification.md)")
     print(f"next: {nxt}")
     return 0
 
