@@ -164,3 +164,28 @@ def test_a_surge_and_sway_plan_flies_on_the_estimated_position_or_is_refused(udr
     core.start_flight()
     surge = [feed.step(z=2.0).tau[0] for _ in range(100)]
     assert flight.state == "flying" and np.ptp(surge) > 1.0  # the surge excitation is flown
+
+
+def test_past_half_the_turns_guard_the_yaw_moment_unwinds(core, plan):
+    """Beyond half the turns guard (here 1 turn: half a turn) a yaw moment that would turn the
+    heading further is flown with the opposite sign, the same magnitude; one that unwinds is kept."""
+    feed = Feeder(core)
+    feed.noise = 1e-2  # 30 s of one depth: 1 mm of noise looks stuck to the filter
+    flight = core.fly(plan, FlightGuards(turns=1.0, yaw_rate_rad_s=5.0))
+    feed.step()
+    core.start_flight()
+    flyer = plan.flyer()
+    psi, flipped, kept = 0.3, 0, 0
+    for i in range(len(plan.Z) - 1):
+        psi += 0.25 * core.h  # turning positive, 0.25 rad/s: half a turn after 12.6 s
+        out = feed.step(psi=psi, r=0.25)
+        expected, _ = flyer.step(i, out.y[core.depth_channel()])
+        beyond = abs(flight.turned) > math.pi  # as the flight saw it before this step's command (lags a step)
+        if beyond and expected[3] > 0:
+            flipped += int(out.tau[3] == pytest.approx(-expected[3]))
+        elif beyond and expected[3] < 0:
+            kept += int(out.tau[3] == pytest.approx(expected[3]))
+        if flight.ended:
+            break
+    assert flipped > 10 and kept > 10 and flight.unwound_steps >= flipped - 1
+    assert flight.report()["unwound_s"] > 1.0 and "flipped to unwind" in flight.summary()

@@ -19,6 +19,13 @@ The flight **aborts** (the node goes neutral and holds nothing; the reason is sa
 * anything the adapter reports (:meth:`PlanFlight.abort`): lost telemetry or link, a mode change
   or disarm by someone else, another ground station's stick input, a set-point or an abort message.
 
+**Unwinding.** The plan's yaw moment is open loop, so the heading wanders (measured on
+``rovlab mavlink sim``: two of three 300 s flights reached two turns and were aborted). Once the
+heading has turned more than half the turns guard from the start, a yaw moment that would turn it
+further is commanded with the opposite sign (same magnitude and hold): the excitation stays as
+rich, the identification reads the PWM actually commanded, and the model is symmetric in N. The
+steps so flipped are counted (``unwound_s`` in the report).
+
 States: ``waiting`` (loaded; the adapter starts it once the vehicle obeys at the start depth),
 ``flying``, then ``complete`` or ``aborted``. :meth:`PlanFlight.report` says what was flown.
 """
@@ -92,6 +99,7 @@ class PlanFlight:
         self.reason = ""  # why it aborted
         self.steps = 0  # control steps flown
         self.guard_steps = 0  # of which with the plan's depth guard on (excitation paused)
+        self.unwound_steps = 0  # of which with the yaw moment's sign flipped to unwind the heading
         self.start_stamp: float | None = None
         self.end_stamp: float | None = None
         self.start_k: int | None = None
@@ -136,7 +144,11 @@ class PlanFlight:
         i = min(self.steps // self.per_command, len(self.plan.Z) - 1)
         tau, guarded = self.flyer.step(i, depth, **horizontal)
         self.guard_steps += int(guarded)
-        return [float(v) for v in tau]
+        out = [float(v) for v in tau]
+        if abs(self.turned) > math.pi * self.guards.turns and out[3] * self.turned > 0.0:
+            out[3] = -out[3]  # turning further: the same moment the other way (module docstring)
+            self.unwound_steps += 1
+        return out
 
     def after_step(self, stamp: float, *, z: float, z_sample: float | None, psi: float | None, r: float | None,
                    depth_status: str) -> None:
@@ -190,6 +202,7 @@ class PlanFlight:
     def report(self) -> dict[str, Any]:
         return {"state": self.state, "reason": self.reason, "flown_s": round(self.duration_s, 3),
                 "plan_s": round(self.n_steps * self.h, 3), "guard_s": round(self.guard_steps * self.h, 3),
+                "unwound_s": round(self.unwound_steps * self.h, 3),
                 "turns": round(self.turned / (2 * math.pi), 3),
                 "depth_range_m": [round(v, 3) for v in self.depth_range] if self.steps else [],
                 "max_yaw_rate_deg_s": round(math.degrees(self.max_yaw_rate), 1),
@@ -200,7 +213,7 @@ class PlanFlight:
         head = {"waiting": "flight not started", "flying": "flying", "complete": "flight complete",
                 "aborted": "FLIGHT ABORTED"}[self.state]
         text = (f"{head}: {r['flown_s']:.1f} of {r['plan_s']:.1f} s of the plan flown, {r['guard_s']:.1f} s with its "
-                f"depth guard on (excitation paused)")
+                f"depth guard on (excitation paused), {r['unwound_s']:.1f} s with the yaw moment flipped to unwind")
         if self.steps:
             text += (f", depth {r['depth_range_m'][0]:.2f} .. {r['depth_range_m'][1]:.2f} m, turned {r['turns']:+.2f} "
                      f"turns, yaw rate up to {r['max_yaw_rate_deg_s']:.0f} deg/s")
