@@ -41,6 +41,10 @@ HORIZONTAL = ("surge", "sway")
 OUTPUT_DOFS = ("surge", "sway", "north", "east")  # Channel.dof of u, v (DVL) and x, y (position)
 _STATE = {("surge", "velocity"): 2, ("sway", "velocity"): 3, ("north", "position"): 0, ("east", "position"): 1}
 SPEED_FLOOR = 0.03  # m/s: below this largest speed a DOF is not excited
+# m/s: below this RMS speed neither. A pilot's dive moves sway at 0.3-1.5 cm/s RMS, mostly the
+# Coriolis drift of turns made while moving forward (-M_u u r): on 19 such dives with a DVL, Y_vdot
+# came out up to 23 % off and within +-2 sigma in 58 % only; a plan's sway runs at ~6 cm/s RMS
+SPEED_RMS_FLOOR = 0.02
 HOPELESS = 1.0 / _d.MAX_REL  # a parameter whose sigma exceeds this many refusal thresholds is refused at once
 
 
@@ -345,6 +349,7 @@ def fit_horizontal(data: _d.DiveData, start: Mapping[str, _d.DofModel], dofs: Se
                  float(np.max(np.abs(speeds[d]))) if speeds[d].size else 0.0) for d in HORIZONTAL}
     out: dict[str, _d.DofFit] = {}
     keys: list[tuple[str, str]] = []
+    weak: dict[str, str] = {}
     for dof in dofs:
         chosen = [k for k in _d.KEYS if k in free.get(dof, _d.DEFAULT_FREE) and k != "net_buoyancy"]
         if "added_mass" in chosen and "thrust_scale" in chosen:
@@ -353,11 +358,13 @@ def fit_horizontal(data: _d.DiveData, start: Mapping[str, _d.DofModel], dofs: Se
                                       "a larger added mass from weaker thrust; hold one (measure the thrust with "
                                       "rovlab identify thrust, or keep the file's added mass)")
         s_rms, s_max = stats[dof]
+        why = (f"the log does not excite {dof}: its {dof} speed is {s_rms:.3g} m/s RMS, at most {s_max:.3g} m/s "
+               f"(need > {SPEED_RMS_FLOOR:g} RMS and {SPEED_FLOOR:g} at most); fly rovlab lab plan-dive --dofs {dof}")
         if s_max < SPEED_FLOOR:
-            why = (f"the log does not excite {dof}: the largest {dof} speed is {s_max:.3g} m/s (need > "
-                   f"{SPEED_FLOOR:g}); fly rovlab lab plan-dive --dofs {dof}")
             out[dof] = _d._refused_dof(dof, start[dof], why, s_rms, s_max)
             continue
+        if s_rms < SPEED_RMS_FLOOR:  # fitted with the other DOF (it moves, and couples), not reported
+            weak[dof] = why + " (its parameters were fitted alongside the other DOF's, not reported)"
         keys += [(dof, k) for k in chosen]
     if not keys:
         return out
@@ -408,6 +415,14 @@ def fit_horizontal(data: _d.DiveData, start: Mapping[str, _d.DofModel], dofs: Se
                                 f"it does); held at the file's value; to determine it: {_d._manoeuvre(d, k, stats[d][0])}")
     raw = prob.residuals(theta, np.ones(len(prob.channels)))
     for dof in sorted({d for d, _ in keys}, key=HORIZONTAL.index):
+        if dof in weak:  # refused, but its fitted model kept (the yaw fit's Munk moment uses its added mass)
+            from dataclasses import replace
+
+            ref = _d._refused_dof(dof, start[dof], weak[dof], *stats[dof])
+            prs = tuple(replace(p, sigma=float(sig[cur.index((dof, p.key))])) if (dof, p.key) in cur else p
+                        for p in ref.params)
+            out[dof] = replace(ref, params=prs, model=models[dof])
+            continue
         idx = [i for i, (d, _) in enumerate(cur) if d == dof]
         est = tuple(cur[i][1] for i in idx)
         dd = np.sqrt(np.maximum(np.diag(cov_hac)[idx], 1e-300))
@@ -610,10 +625,9 @@ def with_munk_moment(data: _d.DiveData, vehicle: Any, hfits: Mapping[str, _d.Dof
     if vel is None:
         return data
     am = {}
-    for dof in HORIZONTAL:
+    for dof in HORIZONTAL:  # a DOF fitted but too weakly moved to report still gives its fitted model
         f = hfits.get(dof)
-        am[dof] = (f.param("added_mass").estimate if f is not None and not f.refused_dof
-                   else float(vehicle.added_mass[_d._DOF_INDEX[dof]]))
+        am[dof] = f.model.added_mass if f is not None else float(vehicle.added_mass[_d._DOF_INDEX[dof]])
     tau = np.array(data.tau, dtype=float, copy=True)
     tau[:, 3] -= (am["surge"] - am["sway"] + shift) * vel[0] * vel[1]
     note = (f"yaw input: with the Munk moment -(X_udot - Y_vdot) u v, X_udot - Y_vdot = {am['surge'] - am['sway']:.4g} "
@@ -633,7 +647,7 @@ def with_munk_uncertainty(yaw: _d.DofFit, data: _d.DiveData, vehicle: Any, hfits
     var = 0.0
     for dof in HORIZONTAL:
         f = hfits.get(dof)
-        if f is not None and not f.refused_dof and f.param("added_mass").status == "estimated":
+        if f is not None and math.isfinite(f.param("added_mass").sigma):  # estimated, or fitted unreported
             var += f.param("added_mass").sigma ** 2
     if yaw.refused_dof or not var > 0:
         return yaw
