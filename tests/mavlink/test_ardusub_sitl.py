@@ -262,16 +262,31 @@ def test_bridge_arms_holds_depth_and_heading_follows_a_step_and_disarms_on_exit(
         # dive from the surface (SITL floats 0.13 m deep) and settle, then hold for 15 s
         assert wait_until(lambda: abs(bridge.core.last.x[0] - 1.0) < 0.1, 30.0), "did not reach 1 m"
         time.sleep(8.0)
+        # the heading too: the dive swings it 6-10 deg off, back within 3 deg 30-40 s after reaching the depth
+        # (measured, docs/mavlink.md: a yaw demand inside the thrusters' dead-zone gap waits for the filter's
+        # yaw bias to carry it across)
+        assert wait_until(lambda: abs(math.remainder(bridge.core.last.x[1] - psi0, 2 * math.pi)) < math.radians(1.5),
+                          45.0), "heading not back within 1.5 deg"
         t0 = time.monotonic()
         time.sleep(15.0)
         hold = observer.window("truth", t0, time.monotonic())
         yaw = observer.window("yaw", t0, time.monotonic())
+        servos = observer.window("servos", t0, time.monotonic())
         depth_rms = float(np.std(hold[:, 1]))
         heading_err = np.degrees(np.angle(np.exp(1j * (yaw[:, 1] - psi0))))
-        # measured on this SITL (docs/mavlink.md): 2.9 cm and 0.8 deg RMS over 70 s; SIM_Submarine as the
+        # measured on this SITL (docs/mavlink.md): 2.9-3.1 cm and 0.9-1.5 deg RMS over 60 s in 4 runs (depth
+        # z max 1.5 m in the configuration: 3.2-4.2 cm, 15-s windows of them 1.5-5.0 cm); SIM_Submarine as the
         # BlueROV2 Heavy (the model the bridge used to fly it on): 14 cm; SCALED_PRESSURE2 alone scatters 11.7 cm
         assert depth_rms < 0.06, f"true depth scatters {depth_rms * 100:.1f} cm RMS in 15 s"
-        assert float(np.sqrt(np.mean(heading_err ** 2))) < 3.0, heading_err
+        assert float(np.sqrt(np.mean(heading_err ** 2))) < 2.0, heading_err
+        # SITL's thrusters give nothing within 1475-1525 us (SIM_Submarine's ESC dead zone) and the bridge
+        # commands no pulse there but neutral: the cut dead band's inverse rounds a demand in the gap to 1500 or
+        # to the least pulse outside it, 1526 / 1474 us (hovering takes 0.157 N per vertical, 1526 us gives
+        # 0.2175 N). Measured: 0 of 4800 pulses inside in each of 10 runs, 1526 us on the verticals 13-38 % of
+        # the time
+        pulses = servos[:, 1:]
+        assert len(pulses) > 50 and not np.any((pulses > 1475) & (pulses < 1525) & (pulses != 1500)), pulses
+        assert np.any(pulses[:, 4:8] == 1526), pulses
         surface_offset = float(np.mean(hold[:, 1])) - 1.0  # BARO2_GND_PRESS was taken floating 0.13-0.16 m deep
         assert 0.05 < surface_offset < 0.25, surface_offset
 
@@ -285,11 +300,12 @@ def test_bridge_arms_holds_depth_and_heading_follows_a_step_and_disarms_on_exit(
         turned = np.degrees(np.unwrap(yaw[:, 1]) - psi0)
         turned -= 360.0 * np.round(turned[0] / 360.0)
         last5 = after[:, 0] > after[-1, 0] - 5.0
-        assert abs(float(np.mean(z[last5])) - 1.5) < 0.08, z[last5]
-        assert abs(float(np.mean(turned[yaw[:, 0] > yaw[-1, 0] - 5.0])) - 45.0) < 4.0, turned[-20:]
-        # overshoot of the 2-s mean (the true depth's own scatter is ~6 % of the step)
-        assert float(np.max(_smooth(z, 20))) < 1.5 + 0.5 * 0.25
-        assert float(np.max(_smooth(turned, 20))) < 45.0 * 1.10
+        assert abs(float(np.mean(z[last5])) - 1.5) < 0.06, z[last5]
+        assert abs(float(np.mean(turned[yaw[:, 0] > yaw[-1, 0] - 5.0])) - 45.0) < 3.0, turned[-20:]
+        # overshoot of the 2-s mean, measured 7.1-7.4 % / below 1 % (z max 1.5 m: 8.5-11.5 % / 0.6-3.9 %): with
+        # SITL's depth noise it is the hold's scatter (with a Bar30's, SIM_BAR2_RND 0.003: 0.4-1.6 %); docs/mavlink.md
+        assert float(np.max(_smooth(z, 20))) < 1.5 + 0.5 * 0.20
+        assert float(np.max(_smooth(turned, 20))) < 45.0 * 1.08
         assert observer.armed_in_manual()
     finally:
         bridge.stop()
