@@ -255,3 +255,22 @@ def test_every_other_packaged_vehicle_keeps_its_shifted_dead_band():
         else:
             assert kinds == {"shift"}, name
             assert np.all((rows == tk.KIND_QUADRATIC) | (rows == tk.KIND_TABLE)), name
+
+
+def test_a_fitted_curve_written_onto_a_cut_thruster_makes_it_shifted(tmp_path):
+    """rovlab identify thrust --update writes the shifted fit (rovlab.ident.thrust): its dead band shifts the
+    curve, so a thruster that had a cut one loses deadband_kind rather than keeping a cut with a shifted fit."""
+    import shutil
+
+    from rovlab.ident.thrust import fit_thrust_curve, thrust_edits
+    from rovlab.params.edit import edit_vehicle_file
+    from rovlab.params.vehicle import load_vehicle, packaged_vehicle_path
+
+    path = tmp_path / "sitl.toml"
+    shutil.copy(packaged_vehicle_path("ardusub_sitl_heavy"), path)
+    t = load_vehicle(path).thruster("T5")
+    pwm = np.concatenate([np.arange(1100.0, 1470.0, 10.0), np.arange(1540.0, 1901.0, 10.0)])
+    fit = fit_thrust_curve(pwm, np.array([force_from_pwm(t, p) for p in pwm]))
+    v = edit_vehicle_file(path, thrust_edits(fit, ["T5"]))
+    assert v.thruster("T5").deadband_kind == "shift" and v.thruster("T6").deadband_kind == "cut"
+    assert "deadband_kind" in path.read_text().split('name = "T6"')[1].split("[[")[0]
