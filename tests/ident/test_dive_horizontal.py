@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rovlab.ident import dive, horizontal, plan
+from rovlab.ident import dive, plan
 from rovlab.ident.fitting import IdentificationError
 from rovlab.interfaces.cli import main
 from rovlab.params import load_vehicle
@@ -193,7 +193,7 @@ def test_a_log_without_position_or_velocity_refuses_surge_and_sway(capsys, tmp_p
     p = plan.plan_dive(heavy, ("heave", "yaw"), 60.0, seed=1)
     flight = dive.fly_plan(p, heavy, heavy, seed=1)
     data = dive.dive_from_columns(flight.columns, heavy)
-    assert not horizontal.has_horizontal(data) and horizontal.default_dofs(data) == ("heave", "yaw")
+    assert not dive.has_horizontal(data) and dive.default_dofs(data) == ("heave", "yaw")
     with pytest.raises(IdentificationError, match="surge and sway need position or velocity"):
         dive.identify_dive(data, heavy, dofs=("heave", "surge"))
     from rovlab.io.logwriter import write_csv
@@ -210,7 +210,7 @@ def test_a_dof_the_dive_does_not_move_is_refused_naming_the_manoeuvre(dvl):
     p = plan.plan_dive(dvl, ("heave", "yaw"), 90.0, seed=1)
     flight = dive.fly_plan(p, dvl, dvl, seed=1)
     data = dive.dive_from_columns(flight.columns, dvl)
-    assert horizontal.has_horizontal(data)  # a DVL, but no surge / sway excitation
+    assert dive.has_horizontal(data)  # a DVL, but no surge / sway excitation
     fit = dive.identify_dive(data, dvl, dofs=("surge", "sway"))
     for dof in ("surge", "sway"):
         assert fit.fits[dof].refused_dof and f"plan-dive --dofs {dof}" in fit.fits[dof].refused_dof

@@ -41,7 +41,7 @@ alternate between yaw (the yaw moment excited, no surge or sway force) and horiz
 multi-level surge and sway forces, independent of each other, while the yaw excitation is off and
 a weak heading law -- ``heading_gain`` (psi_ref - psi) - ``heading_damping`` r, about a 1 rad/s,
 0.7-damped loop on the file's yaw inertia -- holds the heading the period began with). Heave is
-excited throughout. Without yaw in ``dofs`` every period is horizontal. rovlab.ident.horizontal
+excited throughout. Without yaw in ``dofs`` every period is horizontal. rovlab.ident.dive
 still models the rotation (the logged heading and yaw rate are inputs), so what the heading law
 lets through costs nothing. Levels: log-uniform as for heave, reaching ``surge_speed`` /
 ``sway_speed`` by the file's damping, capped at 80 % of ``dof_capacity``. A horizontal guard keeps
@@ -433,12 +433,10 @@ def expected_sigmas(vehicle: Vehicle, plan: DivePlan, *, split: float = 0.7,
             out.append(Expected(dof, k, dive.NAMES[dof][k], dive.UNITS[dof][k], float(getattr(start, k)),
                                 float(math.sqrt(max(cov[i, i], 0.0)))))
     horiz = [d for d in plan.dofs if d in HORIZONTAL]
-    if horiz:  # surge and sway together, as rovlab.ident.horizontal fits them
-        from rovlab.ident import horizontal
-
+    if horiz:  # surge and sway together, as rovlab.ident.dive.fit_horizontal fits them
         starts = {d: dive.dof_model(vehicle, d) for d in HORIZONTAL}
         hkeys = [(d, k) for d in horiz for k in dive.KEYS if k in free and k != "net_buoyancy"]
-        hp = horizontal.HorizontalProblem(data, starts, hkeys, a, t1)
+        hp = dive.HorizontalProblem(data, starts, hkeys, a, t1)
         J = hp.jacobian(hp.initial(), hp.sigma)
         cov = np.linalg.pinv(J.T @ J)
         for i, (d, k) in enumerate(hkeys):

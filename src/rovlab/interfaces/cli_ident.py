@@ -945,7 +945,7 @@ def _cmd_dive(args: argparse.Namespace) -> int:
     except (ValueError, RuntimeError) as exc:  # rovlab.interfaces.mavlink.logs.LogError, a missing pymavlink
         raise _user_error(str(exc)) from None
     if dofs is None:
-        from rovlab.ident.horizontal import default_dofs
+        from rovlab.ident.dive import default_dofs
 
         dofs = list(default_dofs(data))
     compare = _compare_set(args.compare, v)
