@@ -38,6 +38,18 @@ def test_the_ros2_node_flies_a_plan_against_the_ros2_sim(ros2):
 
     cols = read_mcap_columns(ros2 / "node.mcap")  # the node's own recording, node.rovlab.mcap
     assert {"tau_Z", "tau_N", "pwm_T1"} <= set(cols) and len(cols["time_s"]) >= 300
+    # and identify dive reads it (the PWM commanded, the samples each step used): the scenario's vehicle
+    # is the packaged bluerov2_heavy, so its damping is the file's (Z_w -33 N s/m, N_|r|r -1.5 N m s^2/rad^2)
+    import json
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-m", "rovlab.interfaces.cli", "identify", "dive", str(ros2 / "node.mcap"),
+                          "--vehicle", "bluerov2_heavy", "--json"], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    fit = json.loads(res.stdout)
+    assert fit["heave"]["parameters"]["Z_w"]["estimate"] == pytest.approx(-33.0, rel=0.35)
+    assert fit["yaw"]["parameters"]["N_|r|r"]["estimate"] == pytest.approx(-1.5, rel=0.35)
 
 
 def test_an_abort_message_aborts_the_ros2_flight_to_neutral(ros2):

@@ -1059,12 +1059,21 @@ def _dive_text(fit, vehicle: str, compare_arg: str | None = None) -> str:
 def read_dive_log(path: str | Path, vehicle: Any) -> Any:
     """A dive (rovlab.ident.dive.DiveData) from a CSV log, or from a .tlog / .BIN / .mcap MAVLink
     log through the MAVLink log readers (SERVO_OUTPUT_RAW through the thrust curves,
-    SCALED_PRESSURE2 depth, ATTITUDE heading and yaw rate), the same columns as a CSV's."""
+    SCALED_PRESSURE2 depth, ATTITUDE heading and yaw rate), the same columns as a CSV's; or from a
+    ROS node's recording (FILE.mcap with its FILE.rovlab.mcap: the PWM it commanded and the samples
+    each control step used)."""
     from rovlab.ident import dive
 
     path = Path(path)
     if path.suffix.lower() not in (".tlog", ".bin", ".mcap"):
         return dive.read_dive(path, vehicle)
+    series = path if path.name.endswith(".rovlab.mcap") else path.with_name(path.stem + ".rovlab.mcap")
+    if path.suffix.lower() == ".mcap" and series.exists():  # a ROS node's recording (e.g. rovlab ros2 node --fly)
+        from rovlab.io.timeseries import read_mcap_columns
+
+        cols = read_mcap_columns(series)  # its PWM commands and the samples of each step (meas_<column>)
+        return dive.dive_from_columns({k.removeprefix("meas_"): v for k, v in cols.items()
+                                       if k == "time_s" or k.startswith(("meas_", "pwm_"))}, vehicle, file=str(path))
     from types import SimpleNamespace
 
     from rovlab.interfaces.mavlink.logs import filter_columns, read_records, stamp_outliers
