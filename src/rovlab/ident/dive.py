@@ -1073,7 +1073,8 @@ class HorizontalProblem:
         tg = t0 + h * np.arange(n + 1)
         self.channels = [c for c in data.channels if c.dof in OUTPUT_DOFS and c.t.size]
         if not self.channels:
-            raise IdentificationError(no_horizontal_reason(data, _VehicleName(data.file)))
+            raise IdentificationError(f"{data.file}: surge and sway need position or velocity in the log (a DVL's u, v "
+                                      "or a position's x, y); it has none")
         self.sigma = np.array([c.sigma for c in self.channels], dtype=float)
         self.has_pos = any(c.kind == "position" for c in self.channels)
         self.nuisance = 4 if self.has_pos else 2
@@ -1292,11 +1293,6 @@ class HorizontalProblem:
             hi.append({"added_mass": 0.0, "linear": 0.0, "quadratic": 0.0, "thrust_scale": 20.0}[k])
         n = self.nuisance * self.W
         return np.array(lo + [-np.inf] * n), np.array(hi + [np.inf] * n)
-
-
-class _VehicleName:
-    def __init__(self, file: str) -> None:
-        self.name = f"the vehicle of {file}"
 
 
 def body_speeds(data: DiveData, t0: float, t1: float) -> dict[str, np.ndarray]:
