@@ -546,6 +546,7 @@ class DiveFit:
     prediction: Mapping[str, Mapping[str, list[float]]]  # output -> {"identified": [..], "file": [..], "n": [..]}
     notes: tuple[str, ...] = ()
     compare: Any = None  # the published set scored as rows["published"] (rovlab.ident.published.PublishedSet)
+    fitted: Any = None  # the DiveData heave and yaw were fitted on (yaw's input with the Munk moment where modelled)
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"file": self.file, "identification_s": list(self.ident_span),
@@ -849,7 +850,7 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | Non
                   "below 1 m (rovlab lab plan-dive keeps the vehicle there)",)
     if "yaw" in kept and fit_data is data:  # no surge/sway velocity in the log: the Munk moment left out
         notes += _horizontal_thrust_note(data, a, t_split)
-    return DiveFit(data.file, fits, (a, t_split), (t_split, b), pred, notes, compare)
+    return DiveFit(data.file, fits, (a, t_split), (t_split, b), pred, notes, compare, fit_data)
 
 
 def _horizontal_thrust_note(data: DiveData, t0: float, t1: float, *, force_n: float = 2.0,

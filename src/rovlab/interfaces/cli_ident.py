@@ -994,7 +994,7 @@ def _dive_figure(fit: Any, data: Any, vehicle: Any, path: Path) -> Any:
               "file": {d: dive.dof_model(vehicle, d) for d, f in fit.fits.items() if not f.refused_dof}}
     if fit.compare is not None:
         models["published"] = fit.compare.models(vehicle, tuple(models["file"]))
-    traces = dive.validation_traces(data, models, *fit.valid_span)
+    traces = dive.validation_traces(fit.fitted or data, models, *fit.valid_span)  # yaw's input as fitted
     return plots.plot_dive(fit, traces, path, title=f"Dive validation: {Path(fit.file).name} ({vehicle.name}), "
                                                     f"identified on {fit.ident_span[0]:.0f}-{fit.ident_span[1]:.0f} s, "
                                                     f"validated on {fit.valid_span[0]:.0f}-{fit.valid_span[1]:.0f} s")
