@@ -123,18 +123,24 @@ def control_step_for(*components: object):
 
 
 @njit(cache=True, **WITHOUT_NRT)
-def plant_push(plant, act, drive, row, pwm, tau_real):
-    """Advance the plant one control period (noise of ``row`` of ``drive``) with the thrust the
-    PWM commands ``pwm`` give; ``tau_real`` (4) receives that wrench [X, Y, Z, N] on the plant's
-    true vehicle (act.B_true, act.rows)."""
+def plant_push(plant, act, drive, row, pwms, weights, tau_real):
+    """Advance the plant one control period (noise of ``row`` of ``drive``) with the thrust of the
+    PWM commands ``pwms`` (one row per command, each in force for its ``weights`` fraction of the
+    period; weights summing to 1): the period's mean wrench, which ``tau_real`` (4) receives [X, Y,
+    Z, N] on the plant's true vehicle (act.B_true, act.rows). One row of weight 1: the thrust of one
+    command over the whole period. Several: a command that arrived within the period acts from when
+    it arrived (rovlab.sim.realtime), its impulse over the period exact."""
     f = act.f_real
-    bank_force_into(act.rows, act.grid_pwm, act.grid_force, pwm, f)
     for a in range(4):
-        r = _DOF6[a]
-        acc = 0.0
-        for i in range(f.shape[0]):
-            acc += act.B_true[r, i] * f[i]
-        tau_real[a] = acc
+        tau_real[a] = 0.0
+    for j in range(pwms.shape[0]):
+        bank_force_into(act.rows, act.grid_pwm, act.grid_force, pwms[j], f)
+        for a in range(4):
+            r = _DOF6[a]
+            acc = 0.0
+            for i in range(f.shape[0]):
+                acc += act.B_true[r, i] * f[i]
+            tau_real[a] += weights[j] * acc
     plant_advance(plant, drive, row, tau_real, tau_real)
 
 

@@ -190,7 +190,7 @@ class ArduSubSim:
             self._t0 = now
         drain(self.conn, lambda msg: self._handle(msg, now), self.counts, self._warn_once)  # bounded per call
         self._failsafe(now)
-        self._actuate()
+        self._actuate(now - self._t0)
         self._advance(now - self._t0)
         self._telemetry(now)
 
@@ -507,11 +507,12 @@ class ArduSubSim:
                 self.armed = False
                 self._status("Disarming motors (pilot input failsafe)")
 
-    def _actuate(self) -> None:
+    def _actuate(self, elapsed: float) -> None:
+        """The motors' PWM from the pilot inputs now, acting from ``elapsed`` s of simulated time."""
         if self.armed and self.mode in SIMULATED_MODES:
-            self.sim.set_pwm(self.mixer.pwm_us(self.mixer.outputs(self.inputs)))
+            self.sim.set_pwm(self.mixer.pwm_us(self.mixer.outputs(self.inputs)), at=elapsed)
         else:
-            self.sim.set_pwm(self.sim.neutral_pwm)
+            self.sim.set_pwm(self.sim.neutral_pwm, at=elapsed)
 
     def _telemetry(self, now: float) -> None:
         due = [k for k, t in self._due.items() if now >= t]

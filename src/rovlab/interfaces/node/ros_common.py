@@ -727,8 +727,10 @@ class SimAdapter(RosAdapter):
             self.last_ref, self.last_ref_time = s.reference, now
 
     def set_pwm(self, msg: Any) -> None:
-        """The thrusters' PWM commands of a message (a wrong one is logged and ignored)."""
+        """The thrusters' PWM commands of a message (a wrong one is logged and ignored), acting from
+        when it arrived (before the vehicle started: from its first period)."""
+        t0 = getattr(self, "t0", None)
         try:
-            self.sim.set_pwm(list(msg.data))
+            self.sim.set_pwm(list(msg.data), at=None if t0 is None else self.now() - t0)
         except ValueError as exc:
             self.warn("pwm", f"thrusters/pwm_us ignored: {exc}")
