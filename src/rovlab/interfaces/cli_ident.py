@@ -843,6 +843,7 @@ def _dofs_arg(text: str) -> list[str]:
 
 def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
     from rovlab.ident import plan as dive_plan
+    from rovlab.ident.dive import sensor_channels as dive_sensors
 
     v = _lab_vehicle(args)
     plan = _lab_call(lambda: dive_plan.plan_dive(
@@ -891,6 +892,9 @@ def _cmd_lab_plan_dive(args: argparse.Namespace) -> int:
         print("  (surge/sway sigmas count the DVL's or position's noise only: with a quiet DVL the surge/sway force "
               "noise dominates, and the fit's sigmas were 6-16 times these on bluerov2_heavy_dvl; "
               "docs/identification.md)")
+        if "yaw" in plan.dofs and "u" not in dive_sensors(v):
+            print("  note: no DVL in the vehicle file: yaw in a surge/sway plan is poorly determined from a position "
+                  "alone (the Munk moment needs the surge and sway velocity); fly yaw in a heave,yaw plan of its own")
     print(f"next: {nxt}")
     return 0
 
