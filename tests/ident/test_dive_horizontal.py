@@ -172,6 +172,18 @@ def test_the_yaw_fit_takes_the_munk_moment_where_the_log_has_surge_and_sway_velo
     assert abs(fit.fits["yaw"].param("linear").estimate / flight.truth["N_r"] - 1) > 0.15
 
 
+def test_a_dvl_log_without_heading_still_gives_heave(dvl):
+    """Heave and yaw asked for, the log with a DVL but no heading: the surge/sway fit behind the Munk
+    moment cannot run (it needs the heading), and must not stop heave (it raised)."""
+    p = plan.plan_dive(dvl, ("heave", "yaw", "surge", "sway"), 90.0, seed=1)
+    flight = dive.fly_plan(p, dvl, dvl, seed=1)
+    cols = {k: c for k, c in flight.columns.items() if k != "psi_imu"}
+    fit = dive.identify_dive(dive.dive_from_columns(cols, dvl), dvl, dofs=("heave", "yaw"))
+    assert not fit.fits["heave"].refused_dof and fit.fits["yaw"].refused_dof
+    with pytest.raises(IdentificationError, match="heading"):  # asked for: said why not
+        dive.identify_dive(dive.dive_from_columns(cols, dvl), dvl, dofs=("surge",))
+
+
 def test_a_position_only_dive_identifies_surge_and_sway(usbl):
     p = plan.plan_dive(usbl, ("heave", "yaw", "surge", "sway"), 300.0, seed=1)
     truth = dive.hidden_vehicle(usbl, 5)

@@ -821,7 +821,11 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | Non
     if any(d in HORIZONTAL_DOFS for d in dofs):  # first: yaw takes its X_udot - Y_vdot
         hfits = fit_requested_horizontal(data, vehicle, dofs, free, a, t_split, max_rel=max_rel)
     if "yaw" in dofs and has_horizontal(data):  # the Munk moment as a known yaw input
-        munk = hfits or fit_requested_horizontal(data, vehicle, HORIZONTAL_DOFS, free, a, t_split, max_rel=max_rel)
+        try:
+            munk = hfits or fit_requested_horizontal(data, vehicle, HORIZONTAL_DOFS, free, a, t_split,
+                                                     max_rel=max_rel)
+        except IdentificationError:  # not asked for, and not possible (e.g. no heading): yaw without it
+            munk = {}
         fit_data = with_munk_moment(data, vehicle, munk)
     for dof in dofs:
         if dof in HORIZONTAL_DOFS:  # above, together (fit_requested_horizontal)
