@@ -269,6 +269,11 @@ def test_cli_plan_fly_identify_update_surge_and_sway(capsys, tmp_path):
     x = res["surge"]["parameters"]["X_|u|u"]
     assert x["status"] == "estimated" and abs(x["estimate"] - truth["X_|u|u"]) < 3 * x["sigma"]
     assert "u_mps" in res["prediction_rmse"] and "v_mps" in res["prediction_rmse"]
+    # the published set (Wu 2018, bluerov2_heavy_dvl's default) is scored in surge and sway too (it was NaN)
+    for lab in ("u_mps", "v_mps"):
+        rows = res["prediction_rmse"][lab]
+        assert all(math.isfinite(x) and x > 0 for x in rows["published"]), rows
+        assert rows["identified"][-1] < rows["published"][-1], rows  # 100 steps: its 4x smaller damping shows
     v = load_vehicle(target)
     assert v.damping_quadratic[0] == pytest.approx(x["estimate"], rel=1e-3)
     assert v.added_mass[1] == pytest.approx(res["sway"]["parameters"]["Y_vdot"]["estimate"], rel=1e-3)

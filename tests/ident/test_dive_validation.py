@@ -52,8 +52,13 @@ def test_the_packaged_published_set_is_wu_2018_with_its_citation(heavy):
     assert "Flinders" in s.citation and "Table" in s.citation
     # Wu 2018 Tables 5.1-5.3 (printed positive; SNAME signs here)
     assert s.values == {"mass": 11.5, "I_zz": 0.16, "Z_wdot": -14.57, "N_rdot": -0.12, "Z_w": -5.18,
-                        "Z_|w|w": -36.99, "N_r": -0.07, "N_|r|r": -1.55}
-    m = s.models(heavy)
+                        "Z_|w|w": -36.99, "N_r": -0.07, "N_|r|r": -1.55, "X_udot": -5.5, "Y_vdot": -12.7,
+                        "X_u": -4.03, "X_|u|u": -18.18, "Y_v": -6.22, "Y_|v|v": -21.66}
+    m = s.models(heavy, ("heave", "yaw", "surge", "sway"))
+    assert (m["surge"].rigid, m["surge"].added_mass, m["surge"].linear, m["surge"].quadratic) == (11.5, -5.5, -4.03,
+                                                                                                  -18.18)
+    assert (m["sway"].rigid, m["sway"].added_mass, m["sway"].linear, m["sway"].quadratic) == (11.5, -12.7, -6.22,
+                                                                                                -21.66)
     assert (m["heave"].rigid, m["heave"].added_mass, m["heave"].linear, m["heave"].quadratic) == (11.5, -14.57, -5.18,
                                                                                                   -36.99)
     assert (m["yaw"].rigid, m["yaw"].added_mass, m["yaw"].linear, m["yaw"].quadratic) == (0.16, -0.12, -0.07, -1.55)

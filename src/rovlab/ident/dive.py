@@ -843,7 +843,7 @@ def identify_dive(data: DiveData, vehicle: Vehicle, *, dofs: Sequence[str] | Non
     pred = prediction_errors(fit_data, {d: fits[d].model for d in kept}, {d: dof_model(vehicle, d) for d in kept},
                              t_split, b, published=compare.models(vehicle, kept) if compare is not None else None)
     if hfits:
-        fits, pred = merge_horizontal(data, vehicle, dofs, hfits, fits, pred, t_split, b)
+        fits, pred = merge_horizontal(data, vehicle, dofs, hfits, fits, pred, t_split, b, compare)
     notes = fit_data.notes
     depth = data.channel("heave", "position")
     if depth is not None and depth.y.size and abs(float(np.median(depth.y))) < 0.3:
@@ -1452,12 +1452,15 @@ def fit_horizontal(data: DiveData, start: Mapping[str, DofModel], dofs: Sequence
 def horizontal_prediction_errors(data: DiveData, identified: Mapping[str, DofModel],
                                  start: Mapping[str, DofModel], t0: float, t1: float, *,
                                  step_s: float = PREDICTION_STEP_S, horizons: Sequence[int] = HORIZONS,
-                                 every_s: float = 1.0) -> dict[str, dict[str, list[float]]]:
+                                 every_s: float = 1.0, published: Mapping[str, DofModel] | None = None,
+                                 ) -> dict[str, dict[str, list[float]]]:
     """k-step prediction RMSE on [t0, t1] of the DVL's surge and sway velocity (``u_mps``,
     ``v_mps``) or, without a DVL, of the horizontal position (``position_m``: the distance between
     predicted and measured x, y), for the identified model and the vehicle file's, from the same
     initial states: the latest DVL sample, the latest position sample (moved on by the latest
-    velocity), or without a DVL the velocity of a line through the last 2 s of positions."""
+    velocity), or without a DVL the velocity of a line through the last 2 s of positions.
+    ``published``: a third model (surge and sway of rovlab.ident.published), scored as
+    ``rows["published"]``."""
     u, v = data.channel("surge", "velocity"), data.channel("sway", "velocity")
     xn, ye = data.channel("north", "position"), data.channel("east", "position")
     head, rate = data.channel("yaw", "position"), data.channel("yaw", "velocity")
@@ -1474,14 +1477,15 @@ def horizontal_prediction_errors(data: DiveData, identified: Mapping[str, DofMod
     step = float(np.median(np.diff(tm)))
     stride = max(1, int(round(every_s / max(step, 1e-3))))
     labels = ("u_mps", "v_mps") if use_vel else ("position_m",)
-    out: dict[str, dict[str, list[float]]] = {lab: {"identified": [], "file": [], "n": []} for lab in labels}
-    models = (identified, start)
+    keys: tuple[str, ...] = ("identified", "file") + (("published",) if published else ())
+    out: dict[str, dict[str, list[float]]] = {lab: {**{key: [] for key in keys}, "n": []} for lab in labels}
+    models = (identified, start) + ((published,) if published else ())
     for k in horizons:
         horizon = k * step_s
         targets = tm[(tm >= t0 + horizon + 2.0) & (tm <= tm[-1] - 1.0)][::stride]
         n = max(1, int(round(horizon / GRID_S)))
         hh = horizon / n
-        errs: dict[str, list[list[float]]] = {lab: [[], []] for lab in labels}
+        errs: dict[str, list[list[float]]] = {lab: [[] for _ in models] for lab in labels}
         for tt in targets:
             ts = tt - horizon
             if use_vel:
@@ -1519,7 +1523,7 @@ def horizontal_prediction_errors(data: DiveData, identified: Mapping[str, DofMod
                     ey = xs[1] - float(np.interp(tt, ye.t, ye.y))
                     errs["position_m"][mi].append(math.hypot(ex, ey))
         for lab in labels:
-            for mi, key in enumerate(("identified", "file")):
+            for mi, key in enumerate(keys):
                 e = np.asarray(errs[lab][mi])
                 out[lab][key].append(float(np.sqrt(np.mean(e**2))) if e.size else math.nan)
             out[lab]["n"].append(len(errs[lab][0]))
@@ -1570,8 +1574,9 @@ def fit_requested_horizontal(data: DiveData, vehicle: Any, dofs: Sequence[str],
 
 def merge_horizontal(data: DiveData, vehicle: Any, dofs: Sequence[str], hfits: Mapping[str, DofFit],
                      fits: Mapping[str, DofFit], pred: Mapping[str, Any], t_split: float,
-                     t_end: float) -> tuple[dict[str, DofFit], dict[str, Any]]:
-    """The fits in the order of ``dofs``, and the prediction errors with surge and sway's added."""
+                     t_end: float, compare: Any = None) -> tuple[dict[str, DofFit], dict[str, Any]]:
+    """The fits in the order of ``dofs``, and the prediction errors with surge and sway's added
+    (``compare``'s too: a rovlab.ident.published.PublishedSet, its values or the file's)."""
     start = {d: dof_model(vehicle, d) for d in HORIZONTAL}
     out = dict(pred)
     if any(not f.refused_dof for f in hfits.values()):
@@ -1579,11 +1584,8 @@ def merge_horizontal(data: DiveData, vehicle: Any, dofs: Sequence[str], hfits: M
         for d, f in hfits.items():
             if not f.refused_dof:
                 ident[d] = f.model
-        mine = horizontal_prediction_errors(data, ident, start, t_split, t_end)
-        if any("published" in rows for rows in pred.values()):  # a published set scored for heave / yaw only
-            for rows in mine.values():
-                rows["published"] = [math.nan] * len(rows["n"])
-        out.update(mine)
+        published = compare.models(vehicle, tuple(HORIZONTAL)) if compare is not None else None
+        out.update(horizontal_prediction_errors(data, ident, start, t_split, t_end, published=published))
     merged = dict(fits) | dict(hfits)
     return {d: merged[d] for d in dofs if d in merged}, out
 

@@ -33,7 +33,7 @@ from rovlab.ident.fitting import IdentificationError
 from rovlab.params.vehicle import Vehicle
 
 PACKAGED = "published_sets.toml"
-_RIGID = {"mass": "heave", "I_zz": "yaw"}
+_RIGID = {"mass": ("heave", "surge", "sway"), "I_zz": ("yaw",)}
 # report name -> (dof, DofModel field)
 _PARAMS = {name: (dof, key) for dof, names in NAMES.items() for key, name in names.items() if key != "thrust_scale"}
 VALUE_KEYS = tuple(_RIGID) + tuple(_PARAMS)
@@ -60,7 +60,7 @@ class PublishedSet:
         for dof in dofs:
             base = dof_model(vehicle, dof)
             changes = {key: self.values[name] for name, (d, key) in _PARAMS.items() if d == dof and name in self.values}
-            rigid = next((k for k, d in _RIGID.items() if d == dof), None)
+            rigid = next((k for k, d in _RIGID.items() if dof in d), None)
             if rigid is not None and rigid in self.values:
                 changes["rigid"] = self.values[rigid]
             out[dof] = base.with_values(changes)
@@ -68,7 +68,7 @@ class PublishedSet:
 
     def taken_from_file(self, dofs: tuple[str, ...] = ("heave", "yaw")) -> list[str]:
         """Report names of the parameters this set does not give (the vehicle file's are used)."""
-        names = [k for k, d in _RIGID.items() if d in dofs] + [n for n, (d, _) in _PARAMS.items() if d in dofs]
+        names = [k for k, d in _RIGID.items() if set(d) & set(dofs)] + [n for n, (d, _) in _PARAMS.items() if d in dofs]
         return [n for n in names if n not in self.values]
 
     def note(self) -> str:
