@@ -58,10 +58,9 @@ def _hidden_file(path: Path, heavy) -> tuple[Path, dict[str, float]]:
 def test_a_plan_flown_through_the_bridge_is_identified_from_its_recording(tmp_path, plan60, heavy):
     """plan (60 s) -> `rovlab mavlink bridge --arm --fly` against `rovlab mavlink sim` on a hidden
     vehicle -> MCAP -> `rovlab identify dive`: the flight completes (exit 0) and the identification
-    finds the hidden vehicle's damping within 30 % and its net buoyancy within 0.5 N. The added
-    mass comes out low (measured 2026-11-27: 24-29 % on 60 s, see docs/identification.md 'Flying a
-    plan': the simulated vehicle applies a PWM change over the control period before it), so it is
-    held to 45 % here."""
+    finds the hidden vehicle's damping within 30 % and its net buoyancy within 0.5 N, its added
+    mass within 20 % (measured 2026-11-27: Z_wdot -6 %, N_rdot -6 % on 60 s; 24-29 % low while the
+    simulated vehicle applied a PWM change from the start of the control period it arrived in)."""
     hidden, truth = _hidden_file(tmp_path / "hidden.toml", heavy)
     port = free_udp_port()
     record = tmp_path / "dive.mcap"
@@ -78,7 +77,8 @@ def test_a_plan_flown_through_the_bridge_is_identified_from_its_recording(tmp_pa
     assert bridge.returncode == 0, out
     assert "flying the plan" in out and "flight complete: 60.0 of 60.0 s" in out, out
     res = subprocess.run([sys.executable, "-m", "rovlab.interfaces.cli", "identify", "dive", str(record), "--vehicle",
-                          "bluerov2_heavy", "--json"], capture_output=True, text=True, timeout=300)
+                          "bluerov2_heavy", "--json", "--no-plot"], capture_output=True, text=True,
+                         timeout=300)  # --no-plot: the figure's default place is the working directory (the checkout)
     assert res.returncode == 0, res.stderr
     fit = json.loads(res.stdout)
     got = {name: p["estimate"] for dof in ("heave", "yaw") for name, p in fit[dof]["parameters"].items()
@@ -89,7 +89,7 @@ def test_a_plan_flown_through_the_bridge_is_identified_from_its_recording(tmp_pa
         assert got[name] == pytest.approx(truth[name], rel=0.30), name
     assert got["B-W"] == pytest.approx(truth["B-W"], abs=0.5)
     for name in ("Z_wdot", "N_rdot"):
-        assert got[name] == pytest.approx(truth[name], rel=0.45), name
+        assert got[name] == pytest.approx(truth[name], rel=0.20), name
 
 
 @pytest.fixture(scope="module")

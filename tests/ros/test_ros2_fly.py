@@ -45,7 +45,8 @@ def test_the_ros2_node_flies_a_plan_against_the_ros2_sim(ros2):
     import sys
 
     res = subprocess.run([sys.executable, "-m", "rovlab.interfaces.cli", "identify", "dive", str(ros2 / "node.mcap"),
-                          "--vehicle", "bluerov2_heavy", "--json"], capture_output=True, text=True, timeout=300)
+                          "--vehicle", "bluerov2_heavy", "--json", "--no-plot"], capture_output=True, text=True,
+                         timeout=300)  # --no-plot: the figure's default place is the working directory (the checkout)
     assert res.returncode == 0, res.stderr
     fit = json.loads(res.stdout)
     assert fit["heave"]["parameters"]["Z_w"]["estimate"] == pytest.approx(-33.0, rel=0.35)
