@@ -378,7 +378,7 @@ class MavlinkBridge:
         problem = self._last_implausible
         kind = "implausible"
         last = self.core.last
-        if problem is None and last is not None:
+        if problem is None and last is not None and self.last_telemetry is not None:  # before any: "no telemetry"
             labels = [lab for c, lab in zip(self.core.channels, last.channel_status)
                       if c.quantity == "z" and self.core.sensor_of_kind("pressure") == c.sensor]
             bad = [lab for lab in labels if lab not in ("ok", "recovering")]
