@@ -54,7 +54,7 @@ from typing import Any
 # named there as plain Python (design code numba never compiles).
 KERNEL_MODULES = (
     "allocation/kernels.py", "allocation/lexicographic.py", "allocation/solvers.py",
-    "control/dp.py", "control/lqg.py", "control/mrac.py",
+    "control/dp.py", "control/lqg.py", "control/mrac.py", "control/open_loop.py",
     "core/angles.py", "core/components.py",
     "estimation/ekf.py", "estimation/fusion.py", "estimation/kalman.py", "estimation/kf.py", "estimation/layout.py",
     "estimation/offline.py",
