@@ -583,13 +583,35 @@ def _hold_text(dof: str) -> str:
             "surge": "surge (no surge speed to speak of)", "sway": "sway (no sway speed to speak of)"}[dof]
 
 
+def _reweighted_fit(prob: Any, th0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                    weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Output error with unknown noise levels (heave/yaw's _Problem, surge/sway's
+    HorizontalProblem): fit, re-weight each channel by its residual RMS, fit again. Returns the
+    estimate, its weighted residuals, the standard deviations (the largest of _covariances') and
+    the covariance the correlations are read from (the one that sets the most sigmas)."""
+    from scipy.optimize import least_squares
+
+    for _ in range(2):
+        sol = least_squares(lambda th, w=weights: prob.residuals(th, w), th0,
+                            jac=lambda th, w=weights: prob.jacobian(th, w), bounds=(lo, hi), x_scale="jac",
+                            method="trf", max_nfev=60)
+        th0 = sol.x
+        raw = prob.residuals(th0, np.ones(len(prob.channels)))
+        weights = np.array([max(float(np.sqrt(np.mean(raw[prob.channel_of == ci] ** 2))), 1e-9)
+                            if np.any(prob.channel_of == ci) else prob.sigma[ci]
+                            for ci in range(len(prob.channels))])
+    r = prob.residuals(th0, weights)
+    covs = _covariances(prob, prob.jacobian(th0, weights), r)
+    var = np.max([np.diag(c) for c in covs], axis=0)
+    cov_hac = max(covs, key=lambda c: float(np.trace(c / np.maximum(var, 1e-300))))
+    return th0, r, np.sqrt(var), cov_hac
+
+
 def fit_dof(data: DiveData, dof: str, start: DofModel, t0: float, t1: float, *,
             free: Sequence[str] = DEFAULT_FREE, max_rel: float = MAX_REL, grid_s: float = GRID_S,
             window_s: float | None = None) -> DofFit:
     """Output-error fit of one DOF on [t0, t1] (module docstring), with refusals."""
     window_s = WINDOW_S if window_s is None else window_s
-    from scipy.optimize import least_squares
-
     free = [k for k in KEYS if k in free and not (dof == "yaw" and k == "net_buoyancy")]
     if "added_mass" in free and "thrust_scale" in free:
         raise IdentificationError(f"{NAMES[dof]['added_mass']} and {NAMES[dof]['thrust_scale']} cannot both be "
@@ -618,23 +640,8 @@ def fit_dof(data: DiveData, dof: str, start: DofModel, t0: float, t1: float, *,
         lo, hi = prob.bounds()
         th0 = _inside(th0, lo, hi, [_SCALE[k](start) for k in cur])
         cost_start = 0.5 * float(np.sum(prob.residuals(th0, weights) ** 2))
-        for _ in range(2):  # ML with unknown noise levels: fit, re-weight by the residuals, fit again
-            sol = least_squares(lambda th, w=weights: prob.residuals(th, w), th0,
-                                jac=lambda th, w=weights: prob.jacobian(th, w), bounds=(lo, hi), x_scale="jac",
-                                method="trf", max_nfev=60)
-            th0 = sol.x
-            raw = prob.residuals(th0, np.ones(len(prob.channels)))
-            weights = np.array([max(float(np.sqrt(np.mean(raw[prob.channel_of == ci] ** 2))), 1e-9)
-                                if np.any(prob.channel_of == ci) else prob.sigma[ci]
-                                for ci in range(len(prob.channels))])
-        theta = th0
-        r = prob.residuals(theta, weights)
-        J = prob.jacobian(theta, weights)
-        covs = _covariances(prob, J, r)
+        theta, r, sig, cov_hac = _reweighted_fit(prob, th0, lo, hi, weights)
         g = len(cur)
-        var = np.max([np.diag(c) for c in covs], axis=0)
-        sig = np.sqrt(var)
-        cov_hac = max(covs, key=lambda c: float(np.trace(c / np.maximum(var, 1e-300))))  # for the correlations
         model = prob.model(theta)
         # refuse the worst-determined parameter, if any, and fit again without it
         worst, worst_ratio = None, 1.0
@@ -1336,8 +1343,6 @@ def fit_horizontal(data: DiveData, start: Mapping[str, DofModel], dofs: Sequence
     refusals: a DOF the log does not move is refused whole; a parameter whose sigma is large
     against what it does is held at the file's value and named with the manoeuvre that would
     determine it."""
-    from scipy.optimize import least_squares
-
     speeds = body_speeds(data, t0, t1)
     stats = {d: (float(np.sqrt(np.mean(speeds[d] ** 2))) if speeds[d].size else 0.0,
                  float(np.max(np.abs(speeds[d]))) if speeds[d].size else 0.0) for d in HORIZONTAL}
@@ -1378,22 +1383,7 @@ def fit_horizontal(data: DiveData, start: Mapping[str, DofModel], dofs: Sequence
         lo, hi = prob.bounds()
         th0 = _inside(th0, lo, hi, [_SCALE[k](start[d]) for d, k in cur])
         cost_start = 0.5 * float(np.sum(prob.residuals(th0, weights) ** 2))
-        for _ in range(2):  # ML with unknown noise levels: fit, re-weight by the residuals, fit again
-            sol = least_squares(lambda th, w=weights: prob.residuals(th, w), th0,
-                                jac=lambda th, w=weights: prob.jacobian(th, w), bounds=(lo, hi), x_scale="jac",
-                                method="trf", max_nfev=60)
-            th0 = sol.x
-            raw = prob.residuals(th0, np.ones(len(prob.channels)))
-            weights = np.array([max(float(np.sqrt(np.mean(raw[prob.channel_of == ci] ** 2))), 1e-9)
-                                if np.any(prob.channel_of == ci) else prob.sigma[ci]
-                                for ci in range(len(prob.channels))])
-        theta = th0
-        r = prob.residuals(theta, weights)
-        J = prob.jacobian(theta, weights)
-        covs = _covariances(prob, J, r)  # type: ignore[arg-type]
-        var = np.max([np.diag(c) for c in covs], axis=0)
-        sig = np.sqrt(var)
-        cov_hac = max(covs, key=lambda c: float(np.trace(c / np.maximum(var, 1e-300))))
+        theta, r, sig, cov_hac = _reweighted_fit(prob, th0, lo, hi, weights)
         models = prob.models(theta)
         # refuse the worst-determined parameter and fit again without it; those hopeless (sigma
         # above HOPELESS times the threshold: more than what they do) go at once, which saves the
