@@ -20,12 +20,12 @@ import argparse
 import json
 import math
 import shutil
-import subprocess
 import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -34,79 +34,65 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "mavlink"
 
 def one_run(vehicle: str, config: str, bar2_rnd: float, hold_s: float) -> dict:
     import test_ardusub_sitl as sitl
+
+    work = Path(tempfile.mkdtemp(prefix="rovlab-sitl-"))
+    res: dict = {"vehicle": vehicle, "config": config, "bar2_rnd_m": bar2_rnd}
+    try:
+        with sitl.running_sitl(work) as (bridge_port, _relay, obs):
+            _fly(bridge_port, obs, vehicle, config, bar2_rnd, hold_s, res)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return res
+
+
+def _fly(bridge_port: int, obs: Any, vehicle: str, config: str, bar2_rnd: float, hold_s: float, res: dict) -> None:
     from mavclient import wait_until
 
     from rovlab.interfaces.mavlink.bridge import MavlinkBridge
     from rovlab.params.design import load_design_config
     from rovlab.params.vehicle import load_vehicle
 
-    work = Path(tempfile.mkdtemp(prefix="rovlab-sitl-"))
-    bridge_port = sitl._free_udp_port()
-    relay = sitl.Relay(bridge_port)
-    obs_port = sitl._free_udp_port()
-    obs = sitl.Observer(obs_port)
-    log = open(work / "sitl.log", "w")  # noqa: SIM115 - closed below
-    proc = subprocess.Popen([str(sitl.SITL_BIN), "-w", "--model", "vectored_6dof", "--speedup", "1",
-                             "--home=-35.363261,149.165230,0,0", "--defaults", str(sitl.SITL_PARAMS),
-                             f"-I{sitl._free_instance()}", "--serial0", f"udpclient:127.0.0.1:{relay.port}",
-                             "--serial1", f"udpclient:127.0.0.1:{obs_port}"],
-                            cwd=work, stdout=log, stderr=subprocess.STDOUT)
-    res: dict = {"vehicle": vehicle, "config": config, "bar2_rnd_m": bar2_rnd}
+    if bar2_rnd != 0.2:
+        time.sleep(2.0)
+        obs.set_param("SIM_BAR2_RND", bar2_rnd)
+    bridge = MavlinkBridge(load_vehicle(vehicle), load_design_config(config),
+                           connect=f"udpin:127.0.0.1:{bridge_port}", log=lambda text: None, arm=True)
+    bridge.set_reference(z=1.0)
+    thread = threading.Thread(target=bridge.run, daemon=True)
+    thread.start()
     try:
-        assert wait_until(lambda: obs.heartbeat is not None, 60.0), f"SITL sent nothing ({work / 'sitl.log'})"
-        if bar2_rnd != 0.2:
-            time.sleep(2.0)
-            obs.set_param("SIM_BAR2_RND", bar2_rnd)
-        bridge = MavlinkBridge(load_vehicle(vehicle), load_design_config(config),
-                               connect=f"udpin:127.0.0.1:{bridge_port}", log=lambda text: None, arm=True)
-        bridge.set_reference(z=1.0)
-        thread = threading.Thread(target=bridge.run, daemon=True)
-        thread.start()
-        try:
-            assert wait_until(obs.armed_in_manual, 60.0), "SITL not armed in MANUAL"
-            assert wait_until(lambda: bridge.core.last is not None and abs(bridge.core.last.x[0] - 1.0) < 0.1, 40.0)
-            psi0 = float(bridge.core.reference[3])
-            time.sleep(25.0)
-            t0 = time.monotonic()
-            time.sleep(hold_s)
-            t1 = time.monotonic()
-            hold, yaw, servos = obs.window("truth", t0, t1), obs.window("yaw", t0, t1), obs.window("servos", t0, t1)
-            off = float(np.mean(hold[:, 1])) - 1.0  # BARO2_GND_PRESS was taken floating below the surface
-            res["hold_rms_cm"] = 100 * float(np.std(hold[:, 1]))
-            res["heading_rms_deg"] = float(np.sqrt(np.mean(np.degrees(np.angle(np.exp(1j * (yaw[:, 1] - psi0)))) ** 2)))
-            pulses = servos[:, 1:9]
-            res["pulses_inside_dead_zone"] = int(np.sum((pulses > 1475) & (pulses < 1525) & (pulses != 1500)))
-            res["pulses"] = int(pulses.size)
-            res["verticals_at_1526us"] = float(np.mean(pulses[:, 4:8] == 1526))
-            bridge.set_reference(z=1.5, psi=math.remainder(psi0 + math.radians(45.0), 2 * math.pi))
-            t2 = time.monotonic()
-            time.sleep(40.0)
-            t3 = time.monotonic()
-            after, yaw2 = obs.window("truth", t2, t3), obs.window("yaw", t2, t3)
-        finally:
-            bridge.stop()
-            thread.join(15.0)
-        z = after[:, 1] - off
-        res["step_peak_2s_pct"] = float((np.convolve(z, np.ones(20) / 20, "valid").max() - 1.5) / 0.5 * 100)
-        k = np.nonzero(z >= 1.45)[0]
-        res["step_t90_s"] = float(after[k[0], 0] - t2) if len(k) else None
-        turned = np.degrees(np.unwrap(yaw2[:, 1]) - psi0)
-        turned -= 360.0 * np.round(turned[0] / 360.0)
-        res["yaw_peak_2s_pct"] = float((np.convolve(turned, np.ones(20) / 20, "valid").max() - 45.0) / 45.0 * 100)
-        k = np.nonzero(turned >= 40.5)[0]
-        res["yaw_t90_s"] = float(yaw2[k[0], 0] - t2) if len(k) else None
+        assert wait_until(obs.armed_in_manual, 60.0), "SITL not armed in MANUAL"
+        assert wait_until(lambda: bridge.core.last is not None and abs(bridge.core.last.x[0] - 1.0) < 0.1, 40.0)
+        psi0 = float(bridge.core.reference[3])
+        time.sleep(25.0)
+        t0 = time.monotonic()
+        time.sleep(hold_s)
+        t1 = time.monotonic()
+        hold, yaw, servos = obs.window("truth", t0, t1), obs.window("yaw", t0, t1), obs.window("servos", t0, t1)
+        off = float(np.mean(hold[:, 1])) - 1.0  # BARO2_GND_PRESS was taken floating below the surface
+        res["hold_rms_cm"] = 100 * float(np.std(hold[:, 1]))
+        res["heading_rms_deg"] = float(np.sqrt(np.mean(np.degrees(np.angle(np.exp(1j * (yaw[:, 1] - psi0)))) ** 2)))
+        pulses = servos[:, 1:9]
+        res["pulses_inside_dead_zone"] = int(np.sum((pulses > 1475) & (pulses < 1525) & (pulses != 1500)))
+        res["pulses"] = int(pulses.size)
+        res["verticals_at_1526us"] = float(np.mean(pulses[:, 4:8] == 1526))
+        bridge.set_reference(z=1.5, psi=math.remainder(psi0 + math.radians(45.0), 2 * math.pi))
+        t2 = time.monotonic()
+        time.sleep(40.0)
+        t3 = time.monotonic()
+        after, yaw2 = obs.window("truth", t2, t3), obs.window("yaw", t2, t3)
     finally:
-        proc.terminate()
-        try:
-            proc.wait(10.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5.0)
-        obs.close()
-        relay.close()
-        log.close()
-        shutil.rmtree(work, ignore_errors=True)
-    return res
+        bridge.stop()
+        thread.join(15.0)
+    z = after[:, 1] - off
+    res["step_peak_2s_pct"] = float((np.convolve(z, np.ones(20) / 20, "valid").max() - 1.5) / 0.5 * 100)
+    k = np.nonzero(z >= 1.45)[0]
+    res["step_t90_s"] = float(after[k[0], 0] - t2) if len(k) else None
+    turned = np.degrees(np.unwrap(yaw2[:, 1]) - psi0)
+    turned -= 360.0 * np.round(turned[0] / 360.0)
+    res["yaw_peak_2s_pct"] = float((np.convolve(turned, np.ones(20) / 20, "valid").max() - 45.0) / 45.0 * 100)
+    k = np.nonzero(turned >= 40.5)[0]
+    res["yaw_t90_s"] = float(yaw2[k[0], 0] - t2) if len(k) else None
 
 
 def main() -> int:

@@ -12,6 +12,7 @@ not there (a user's clone). SITL runs in real time: each test takes tens of seco
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import math
 import os
@@ -22,6 +23,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -197,10 +199,11 @@ class Observer:
         self.conn.close()
 
 
-@pytest.fixture(scope="module")
-def sitl(tmp_path_factory):
-    """One ArduSub SITL at sea level for the module: (bridge port, relay, observer)."""
-    work = tmp_path_factory.mktemp("ardusub-sitl")  # it writes eeprom.bin and logs/ where it runs
+@contextlib.contextmanager
+def running_sitl(work: Path) -> Iterator[tuple[int, Relay, Observer]]:
+    """ArduSub SITL at sea level running in ``work`` (it writes eeprom.bin and logs/ there), its first
+    link through a relay to a free port for the bridge, its second to an observer: (bridge port,
+    relay, observer). Stopped, and its logs/ removed, on leaving. Also benchmarks/ardusub_sitl_hold.py's."""
     bridge_port = _free_udp_port()
     relay = Relay(bridge_port)
     obs_port = _free_udp_port()
@@ -225,6 +228,21 @@ def sitl(tmp_path_factory):
         relay.close()
         log.close()
         shutil.rmtree(work / "logs", ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def sitl(tmp_path_factory):
+    """One ArduSub SITL at sea level for the module: (bridge port, relay, observer)."""
+    with running_sitl(tmp_path_factory.mktemp("ardusub-sitl")) as running:
+        yield running
+
+
+def assert_stopped_and_disarmed(bridge: Any, thread: threading.Thread, observer: Observer) -> None:
+    """After bridge.stop(): its thread ended, ArduSub disarmed, the last inputs it sent neutral."""
+    thread.join(15.0)
+    assert not thread.is_alive()
+    assert wait_until(observer.disarmed, 10.0), observer.heartbeat
+    assert bridge.sent and bridge.sent[-1][2]
 
 
 def _bridge(port: int, lines: list[str], **kw: Any):
@@ -309,11 +327,7 @@ def test_bridge_arms_holds_depth_and_heading_follows_a_step_and_disarms_on_exit(
         assert observer.armed_in_manual()
     finally:
         bridge.stop()
-        thread.join(15.0)
-    assert not thread.is_alive()
-    # disarmed on exit, and the last inputs neutral
-    assert wait_until(observer.disarmed, 10.0), observer.heartbeat
-    assert bridge.sent and bridge.sent[-1][2]
+    assert_stopped_and_disarmed(bridge, thread, observer)  # disarmed on exit, and the last inputs neutral
     assert bridge.counts["failsafes"] == 0 and bridge.counts["implausible_depth"] == 0
 
     # the recording replays through rovlab filter to the estimates the bridge made live

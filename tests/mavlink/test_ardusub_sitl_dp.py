@@ -105,10 +105,7 @@ def test_dp_through_the_bridge_holds_a_position_follows_a_step_and_disarms_on_ex
         assert observer.armed_in_manual()
     finally:
         bridge.stop()
-        thread.join(15.0)
-    assert not thread.is_alive()
-    assert wait_until(observer.disarmed, 10.0), observer.heartbeat
-    assert bridge.sent and bridge.sent[-1][2]
+    sitl_tests.assert_stopped_and_disarmed(bridge, thread, observer)
     assert bridge.counts["failsafes"] == 0 and bridge.counts["implausible_position"] == 0
 
 
